@@ -1,0 +1,106 @@
+"""The `crankfmu` command: run, build, and the commands in crankfmu/commands/."""
+from __future__ import annotations
+
+import argparse
+import importlib
+import pkgutil
+import sys
+from pathlib import Path
+
+from . import __version__
+
+
+def _add_run_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("scene", type=Path, help="scene file (.toml)")
+    p.add_argument("--out", type=Path, help="CSV to write (default results/<scene>.csv); the "
+                                            "JSON sidecar and PNG go beside it")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="COMP.PARAM=V",
+                   help="override a parameter (repeatable)")
+    p.add_argument("--stop-time", type=float, help="end of the run [s]")
+    p.add_argument("--step", type=float, help="communication step [s]")
+    p.add_argument("--algorithm", help="master algorithm")
+    p.add_argument("--extrapolation", type=int, choices=(0, 1, 2), help="input extrapolation order")
+    p.add_argument("--tolerance", type=float, help="FMU internal relative tolerance")
+    p.add_argument("--fmus", type=Path, help="folder of built FMUs (default fmus/ beside scenarios/)")
+    p.add_argument("--plot", action="store_true", help="also write a PNG of the recorded variables")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--log", action="store_true", help="print the FMUs' log messages")
+
+
+def load_with_options(args):
+    """The scene with command-line overrides applied (shared by run-like commands)."""
+    from .scenario.scene import SceneError, apply_overrides, load_scene
+
+    scene = load_scene(args.scene)
+    apply_overrides(scene, args.overrides)
+    m = scene.master
+    if args.stop_time is not None:
+        if args.stop_time <= scene.start_time:
+            raise SceneError(scene.path, "--stop-time", f"must exceed start_time = {scene.start_time}")
+        scene.stop_time = args.stop_time
+    for key in ("step", "tolerance"):
+        value = getattr(args, key, None)
+        if value is not None:
+            if value <= 0:
+                raise SceneError(scene.path, f"--{key}", f"must be > 0, got {value}")
+            setattr(m, key, value)
+    if getattr(args, "algorithm", None):
+        m.algorithm = args.algorithm
+    if getattr(args, "extrapolation", None) is not None:
+        m.extrapolation = args.extrapolation
+    return scene
+
+
+def cmd_run(args) -> int:
+    from .cosim.runner import RunOptions, run_scene
+
+    scene = load_with_options(args)
+    result = run_scene(scene, RunOptions(out=args.out, plot=args.plot, fmu_dir=args.fmus,
+                                         progress=False if args.no_progress else None,
+                                         verbose_log=args.log))
+    print(f"{scene.name}: {result.steps} steps of {scene.master.step:g} s with "
+          f"{scene.master.algorithm} in {result.wall_seconds:.2f} s wall")
+    for name, st in result.statistics.items():
+        print(f"  {name}: {st['doStep_calls']} doStep calls, {st['doStep_seconds']:.3f} s")
+    print(f"wrote {result.csv}, {result.sidecar}" + (f", {result.png}" if result.png else ""))
+    return 0
+
+
+def cmd_build(args) -> int:
+    from .fmi.build import build_all
+
+    build_all(args.dest, args.models or None)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="crankfmu", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"crankfmu {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True)
+    run = sub.add_parser("run", help="run a scene")
+    _add_run_options(run)
+    run.set_defaults(func=cmd_run)
+    build = sub.add_parser("build", help="build every FMU into fmus/ and validate it")
+    from .fmi.build import add_arguments
+    add_arguments(build)
+    build.set_defaults(func=cmd_build)
+    from . import commands
+    for mod in pkgutil.iter_modules(commands.__path__):
+        importlib.import_module(f"{commands.__name__}.{mod.name}").register(sub)
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    from .cosim.runner import RunError
+    from .scenario.scene import SceneError
+    try:
+        return args.func(args)
+    except (SceneError, RunError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Subcommands beyond run/build: each module defines register(subparsers)."""

@@ -1,0 +1,1 @@
+"""Co-simulation over fmpy: FMU instances, wiring, master algorithms, recording, the runner."""

@@ -1,0 +1,74 @@
+"""Recording and writing results: CSV (fmpy.util.read_csv layout), JSON sidecar, PNG plot."""
+from __future__ import annotations
+
+import json
+import platform
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+
+
+class Recorder:
+    """Rows of `time` and the recorded variables, grown in blocks."""
+
+    def __init__(self, names: list[str], units: list[str | None]):
+        self.names, self.units = names, units
+        self._rows = np.empty((1024, len(names) + 1))
+        self.count = 0
+
+    def add(self, t: float, values) -> None:
+        if self.count == len(self._rows):
+            self._rows = np.concatenate([self._rows, np.empty_like(self._rows)])
+        self._rows[self.count, 0] = t
+        self._rows[self.count, 1:] = values
+        self.count += 1
+
+    @property
+    def rows(self) -> np.ndarray:
+        return self._rows[:self.count]
+
+    def column(self, name: str) -> np.ndarray:
+        return self.rows[:, 1 + self.names.index(name)]
+
+
+def write_csv(path: Path, recorder: Recorder) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w") as f:
+        f.write(",".join(["time"] + [f'"{n}"' for n in recorder.names]) + "\n")
+        for row in recorder.rows:
+            f.write(",".join(repr(float(v)) for v in row) + "\n")
+
+
+def versions() -> dict:
+    out = {"python": platform.python_version()}
+    for pkg in ("crankfmu", "fmpy", "pythonfmu", "numpy", "scipy"):
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            out[pkg] = None
+    return out
+
+
+def write_sidecar(path: Path, payload: dict) -> None:
+    path.write_text(json.dumps(payload, indent=2, default=float) + "\n")
+
+
+def plot(path: Path, recorder: Recorder, title: str) -> None:
+    """One panel per recorded variable, with units, over time."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = len(recorder.names)
+    fig, axes = plt.subplots(n, 1, figsize=(9, 1.9 * n + 0.8), sharex=True, squeeze=False)
+    t = recorder.rows[:, 0]
+    for ax, name, unit, k in zip(axes[:, 0], recorder.names, recorder.units, range(n)):
+        ax.plot(t, recorder.rows[:, k + 1], lw=1.0)
+        ax.set_ylabel(f"{name}\n[{unit or '1'}]", fontsize=8)
+        ax.grid(alpha=0.3)
+    axes[-1, 0].set_xlabel("time [s]")
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -1,0 +1,147 @@
+"""Resolve a scene into loaded FMUs and checked links, before anything runs.
+
+Checks, each with an error naming the scene file and the key: the FMU exists (a catalog name is
+built on demand), parameters and effects exist in it, every connection runs from an output to an
+input of the same type and unit, inputs given in [inputs] exist and are inputs, recorded
+variables exist.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..scenario.scene import Scene, SceneError
+from .fmu import FmuInstance
+
+
+def default_fmu_dir(scene: Scene) -> Path:
+    """fmus/ beside the scene's scenarios/ folder, else ./fmus."""
+    beside = scene.path.resolve().parent.parent / "fmus"
+    return beside if (beside.parent / "scenarios").is_dir() else Path("fmus").resolve()
+
+
+def resolve_fmu(scene: Scene, comp_name: str, fmu_dir: Path) -> Path:
+    """A path to the component's FMU; builds catalog FMUs that are missing or stale."""
+    ref = scene.components[comp_name].fmu
+    key = f"[components.{comp_name}].fmu"
+    if ref.endswith(".fmu"):
+        path = (scene.path.parent / ref).resolve()
+        if not path.is_file():
+            raise SceneError(scene.path, key, f"no FMU file at {path}")
+        return path
+    from ..fmi.build import build_fmu, runtime_files
+    from ..fmi.model_description import sources_digest
+    from ..physics.catalog import FMU_MODELS
+    if ref not in FMU_MODELS:
+        raise SceneError(scene.path, key, f"unknown FMU {ref!r}; known: {', '.join(FMU_MODELS)}"
+                                          " or a path ending in .fmu")
+    path = fmu_dir / f"{ref}.fmu"
+    digest = sources_digest(runtime_files())
+    if not path.is_file() or _build_id(path) != digest:
+        print(f"building {path} (sources changed or FMU missing)")
+        build_fmu(ref, fmu_dir)
+    return path
+
+
+def _build_id(path: Path) -> str | None:
+    from fmpy import read_model_description
+    try:
+        return read_model_description(str(path)).version
+    except Exception:  # an unreadable FMU is rebuilt
+        return None
+
+
+@dataclass
+class Link:
+    """One connection, resolved to indices of the source's connected-output buffer."""
+
+    source: str
+    source_var: str
+    target: str
+    target_var: str
+    unit: str | None
+
+
+def _check_variable(scene, key, fmu: FmuInstance, name: str, causalities: tuple[str, ...]):
+    if name not in fmu.variables:
+        candidates = sorted(v for v, var in fmu.variables.items() if var.causality in causalities)
+        raise SceneError(scene.path, key, f"{fmu.name} ({fmu.path.name}) has no variable "
+                                          f"{name!r}; {'/'.join(causalities)}s: {', '.join(candidates)}")
+    var = fmu.variables[name]
+    if var.causality not in causalities:
+        raise SceneError(scene.path, key, f"{fmu.name}.{name} is a {var.causality}, "
+                                          f"expected {' or '.join(causalities)}")
+    return var
+
+
+def check_components(scene: Scene, fmus: dict[str, FmuInstance]) -> None:
+    for name, comp in scene.components.items():
+        fmu = fmus[name]
+        for pname in comp.parameters:
+            _check_variable(scene, f"[components.{name}].parameters.{pname}", fmu, pname,
+                            ("parameter",))
+        known_effects = sorted(v[len("effect_"):] for v in fmu.variables if v.startswith("effect_"))
+        for effect in comp.effects:
+            if effect not in known_effects:
+                raise SceneError(scene.path, f"[components.{name}].effects",
+                                 f"{effect!r} is not an effect of {comp.fmu}; effects: "
+                                 f"{', '.join(known_effects) or '(none)'}")
+
+
+def check_links(scene: Scene, fmus: dict[str, FmuInstance]) -> list[Link]:
+    links = []
+    for k, c in enumerate(scene.connections):
+        key = f"[[connections]] #{k + 1}"
+        src_comp, src_var = c.source.split(".", 1)
+        dst_comp, dst_var = c.target.split(".", 1)
+        src = _check_variable(scene, f"{key}.from", fmus[src_comp], src_var, ("output",))
+        dst = _check_variable(scene, f"{key}.to", fmus[dst_comp], dst_var, ("input",))
+        if src.type != dst.type:
+            raise SceneError(scene.path, key, f"type mismatch: {c.source} is {src.type}, "
+                                              f"{c.target} is {dst.type}")
+        if (src.unit or "1") != (dst.unit or "1"):
+            raise SceneError(scene.path, key, f"unit mismatch: {c.source} is in "
+                                              f"{src.unit or '1'}, {c.target} in {dst.unit or '1'}")
+        links.append(Link(src_comp, src_var, dst_comp, dst_var, src.unit))
+    for target in scene.inputs:
+        comp, var = target.split(".", 1)
+        _check_variable(scene, f"[inputs].\"{target}\"", fmus[comp], var, ("input",))
+    for ref in scene.record:
+        comp, var = ref.split(".", 1)
+        _check_variable(scene, "[record].variables", fmus[comp], var,
+                        ("output", "input", "parameter", "local"))
+    return links
+
+
+class System:
+    """The wired scene: FMUs, links and external inputs, with buffers for a master to use."""
+
+    def __init__(self, scene: Scene, fmus: dict[str, FmuInstance], links: list[Link]):
+        self.scene, self.fmus, self.links = scene, fmus, links
+        order = scene.master.order or list(scene.components)
+        self.order = order + [c for c in scene.components if c not in order]
+        # per component: the outputs others need, and the inputs it receives
+        self.out_names = {c: sorted({l.source_var for l in links if l.source == c}) for c in fmus}
+        self.in_names = {c: [l.target_var for l in links if l.target == c] for c in fmus}
+        self.in_sources = {c: [(l.source, self.out_names[l.source].index(l.source_var))
+                               for l in links if l.target == c] for c in fmus}
+        self.read_outputs = {c: fmus[c].reader(self.out_names[c]) for c in fmus}
+        self.write_inputs = {c: fmus[c].writer(self.in_names[c]) for c in fmus}
+        self.outputs = {c: np.zeros(len(self.out_names[c])) for c in fmus}
+        self.external = {c: [(s.target.split(".", 1)[1], s) for s in scene.inputs.values()
+                             if s.target.split(".", 1)[0] == c] for c in fmus}
+        self.write_external = {c: fmus[c].writer([n for n, _ in self.external[c]]) for c in fmus}
+
+    def refresh_outputs(self, comp: str) -> np.ndarray:
+        self.outputs[comp] = self.read_outputs[comp]().copy()
+        return self.outputs[comp]
+
+    def gather_inputs(self, comp: str, outputs: dict[str, np.ndarray] | None = None) -> list[float]:
+        outputs = self.outputs if outputs is None else outputs
+        return [outputs[src][k] for src, k in self.in_sources[comp]]
+
+    def set_external(self, comp: str, t: float) -> None:
+        if self.external[comp]:
+            self.write_external[comp]([s.value_at(t) for _, s in self.external[comp]])

@@ -1,0 +1,170 @@
+"""Build every FMU into fmus/ with pythonfmu and check each with fmpy validate.
+
+Each FMU bundles the runtime (crankfmu.physics and crankfmu.slaves) as a package named
+`crankfmu_rt_<digest>`, where the digest hashes those sources. All Python FMUs in one process
+share one interpreter and one sys.modules: FMUs of the same build share the runtime (same code),
+FMUs of different builds load different packages, so no FMU ever runs another build's code.
+"""
+from __future__ import annotations
+
+import argparse
+import html
+import inspect
+import shutil
+import sys
+import tempfile
+import zipfile
+from pathlib import Path
+
+from ..physics.catalog import FMU_MODELS, physics_class
+from ..slaves.base import ModelSlave, variable_table
+from .model_description import model_description, sources_digest
+
+PACKAGE_DIR = Path(__file__).resolve().parents[1]
+RUNTIME_SUBPACKAGES = ("physics", "slaves")
+# The runtime imports all its modules at once: a later FMU of the same build finds them in
+# sys.modules even after the FMU that first loaded the package was freed and its files deleted.
+RUNTIME_INIT = '''"""crankfmu runtime bundled in FMUs (build {digest})."""
+import importlib
+import pkgutil
+
+for _sub in ("physics", "slaves"):
+    _package = importlib.import_module(f"{{__name__}}.{{_sub}}")
+    for _module in pkgutil.iter_modules(_package.__path__):
+        importlib.import_module(f"{{_package.__name__}}.{{_module.name}}")
+'''
+ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # fixed timestamps: same sources give the same FMU bytes
+
+
+def runtime_files() -> list[tuple[str, bytes]]:
+    files = []
+    for sub in RUNTIME_SUBPACKAGES:
+        for path in sorted((PACKAGE_DIR / sub).glob("*.py")):
+            files.append((f"{sub}/{path.name}", path.read_bytes()))
+    return files
+
+
+def _write_runtime(dest: Path, digest: str) -> Path:
+    package = dest / f"crankfmu_rt_{digest}"
+    for name, data in runtime_files():
+        target = package / name
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_bytes(data)
+    (package / "__init__.py").write_text(RUNTIME_INIT.format(digest=digest))
+    return package
+
+
+def _write_script(dest: Path, model_name: str, digest: str) -> Path:
+    module, cls = FMU_MODELS[model_name].split(":")
+    script = dest / f"crankfmu_{digest}_{model_name}.py"
+    script.write_text(
+        f'"""FMU entry point written by crankfmu build {digest}."""\n'
+        "# pythonfmu's loader finds the class by the literal text \"class X(Fmi2Slave):\"\n"
+        f"from crankfmu_rt_{digest}.slaves.base import ModelSlave as Fmi2Slave\n"
+        f"from crankfmu_rt_{digest}.physics.{module} import {cls} as _Physics\n\n\n"
+        f"class {model_name}(Fmi2Slave):\n"
+        "    physics_class = _Physics\n\n"
+        "    def __init__(self, **kwargs):\n"
+        "        # A function defined here holds a reference to this module's namespace (as its\n"
+        "        # __globals__): without one, pythonfmu 0.7.0's binary frees the namespace of a\n"
+        "        # class-only script when an instance is created, and the next instance crashes.\n"
+        "        super().__init__(**kwargs)\n")
+    return script
+
+
+def model_card_html(model_name: str) -> str:
+    """documentation/index.html: equations (the physics module's docstring), the derivations
+    in docs/models, and tables of parameters, effects, inputs and outputs with units."""
+    cls = physics_class(model_name)
+    rows = []
+    for v in variable_table(cls):
+        rng = "" if v.min is None and v.max is None else f"[{v.min}, {v.max}]"
+        rows.append(f"<tr><td>{v.name}</td><td>{v.causality}</td><td>{v.unit or ''}</td>"
+                    f"<td>{v.start if v.start is not None else ''}</td><td>{rng}</td>"
+                    f"<td>{html.escape(v.description)}</td></tr>")
+    doc = inspect.getmodule(cls).__doc__ or ""
+    extra = ""
+    for path in sorted((PACKAGE_DIR.parents[1] / "docs" / "models").glob("*.md")):
+        if path.stem.replace("_", "") in model_name.lower() or \
+                model_name.lower().startswith(path.stem.split("_")[0]):
+            extra += f"<h2>{path.name}</h2><pre>{html.escape(path.read_text())}</pre>"
+    return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{model_name}</title>"
+            f"</head><body><h1>{model_name}</h1><p>{html.escape(cls.description)}</p>"
+            f"<p>Source: seed {html.escape(cls.seed)}</p><h2>Equations</h2>"
+            f"<pre>{html.escape(doc)}</pre><h2>Variables</h2><table border='1'>"
+            "<tr><th>name</th><th>causality</th><th>unit</th><th>start</th><th>range</th>"
+            f"<th>description</th></tr>{''.join(rows)}</table>{extra}</body></html>")
+
+
+def _repack(built: Path, target: Path, model_name: str, slave_class, digest: str) -> None:
+    """Rewrite pythonfmu's zip: our modelDescription, the model card, fixed timestamps."""
+    entries = {}
+    with zipfile.ZipFile(built) as z:
+        for info in z.infolist():
+            if info.filename != "modelDescription.xml" and not info.is_dir():
+                entries[info.filename] = z.read(info)
+    entries["modelDescription.xml"] = model_description(slave_class, digest)
+    entries["documentation/index.html"] = model_card_html(model_name).encode()
+    with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as z:
+        for name in sorted(entries):
+            info = zipfile.ZipInfo(name, ZIP_DATE)
+            info.compress_type = zipfile.ZIP_DEFLATED
+            info.external_attr = 0o644 << 16
+            z.writestr(info, entries[name])
+
+
+def build_fmu(model_name: str, dest: Path) -> Path:
+    from pythonfmu.builder import FmuBuilder
+
+    digest = sources_digest(runtime_files())
+    dest.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix="crankfmu_build_") as tmp:
+        tmp = Path(tmp)
+        runtime = _write_runtime(tmp, digest)
+        script = _write_script(tmp, model_name, digest)
+        sys.path.insert(0, str(tmp))
+        try:
+            built = FmuBuilder.build_FMU(script, dest=tmp / "out", project_files=[runtime])
+            module = sys.modules[script.stem]
+            slave_class = getattr(module, model_name)
+            target = dest / f"{model_name}.fmu"
+            _repack(built, target, model_name, slave_class, digest)
+        finally:
+            sys.path.remove(str(tmp))
+            for name in [m for m in sys.modules if digest in m]:
+                del sys.modules[name]
+    return target
+
+
+def validate(fmu: Path) -> list[str]:
+    from fmpy.validation import validate_fmu
+
+    return list(validate_fmu(str(fmu)))
+
+
+def build_all(dest: Path, names=None, check: bool = True) -> list[Path]:
+    built = []
+    for name in names or FMU_MODELS:
+        path = build_fmu(name, dest)
+        problems = validate(path) if check else []
+        status = "ok" if not problems else f"{len(problems)} problem(s)"
+        print(f"built {path} ({path.stat().st_size // 1024} KiB): fmpy validate {status}")
+        for p in problems:
+            print(f"  - {p}")
+        if problems:
+            raise SystemExit(f"fmpy validate found problems in {path}")
+        built.append(path)
+    return built
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--dest", type=Path, default=Path("fmus"), help="output folder")
+    parser.add_argument("models", nargs="*", help=f"FMUs to build (default all: "
+                                                  f"{', '.join(FMU_MODELS)})")
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_arguments(parser)
+    args = parser.parse_args(argv)
+    build_all(args.dest, args.models or None)

@@ -1,0 +1,381 @@
+"""Rocker impact unit (seed rocker_impact_unit, eq. 1-2; MODELS.md section 4).
+
+A rigid rocker (inertia J about the pivot, mass m, centre of mass at r, strike point at S from
+the pivot) strikes the end of a semi-infinite elastic rod (the tool). The pivot rests on an
+elastic support that moves along the tool axis. Coordinates: u0 the pivot displacement (toward
+the tool), theta the rocker angle from the strike position (the strike point moves by
+u0 + S theta), w the tool end. Lagrange (docs/models/rocker_impact.md):
+
+    m u0'' + m r theta''       = -P - T                  T = c0 u0       (support)
+    m r u0'' + J_t theta''     = -P S + tau_drive        J_t = J + flange_J
+    w' = P/Z,  Z = E F/a                                  (rod end, radiation impedance)
+    delta = u0 + S theta - w - gap,  P = c delta  or  K delta^1.5 (effect hertz_contact)
+
+Contact is unilateral: it begins when delta rises through 0 and ends when it falls back to 0
+(P returns to zero); both are located as events inside a communication step. While in contact,
+the largest P (an event on delta' = 0, which is P' = 0) and the largest |T| (events on
+u0' = 0, which is T' = 0, and the value at the end of contact) are located too, so the
+last-impact statistics do not depend on the communication step.
+
+Effect support_compliance off: the pivot is pinned (c0 -> infinity), u0 = 0, the strike-point
+mass is J_t/S^2 and T = -P - m r theta'' is the pivot reaction (it feeds through the drive
+torque and inertia).
+
+Linearised stiffnesses (effect hertz_contact off): c = 1.25 K^(2/3) Pm^(1/3) and
+c0 = k_n Tm^(1/3) from the paper's fixed-point iterations on the first-approximation peaks
+(rocker_analysis.linearise, to 0.1 %), at initialization with J_t and the impact speed V0, unless
+c_contact / c_support give them. With hertz_contact on, c0 still comes from that iteration.
+
+The geometry is linearised about the strike position (the paper's model: the strike point moves
+along the tool axis by S theta); a drive may swing the rocker through a few tenths of a radian
+before the strike, the impact itself happens at theta ~ 0.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from .base import Effect, IntegrationError, ParameterError, PhysicsModel, Variable
+from .rocker_analysis import RockerData, linearise
+
+_MO100_S = 1.1 * 0.734 / (35.1 * 0.106)   # 10 % beyond the centre of percussion J/(m r)
+
+
+class RockerImpact(PhysicsModel):
+    model_name = "RockerImpact"
+    description = ("Rocker striking an elastic rod tool: unilateral contact P, elastic pivot "
+                   "support reaction T, events at contact begin/end and at the force peaks")
+    seed = "rocker_impact_unit.txt, eq. (1)-(2), (5)-(8); MO-100 data"
+    integrator = "DOP853"   # oscillatory, not stiff: k1, k2 ~ 1e4 rad/s, no fast decay
+    max_events_per_step = 10000
+
+    parameters = (
+        Variable("J", "kg.m2", "Rocker moment of inertia about the pivot axis", 0.734, min=0.0),
+        Variable("m", "kg", "Rocker mass", 35.1, min=0.0),
+        Variable("r", "m", "Distance pivot - centre of mass (along the pivot-strike line)", 0.106),
+        Variable("S", "m", "Distance pivot - tool axis (strike point); MO-100: 1.1 J/(m r)",
+                 _MO100_S, min=0.0),
+        Variable("R_c", "m", "Radius of the rocker's spherical striking face", 0.060, min=0.0),
+        Variable("d", "m", "Tool (rod) diameter", 0.080, min=0.0),
+        Variable("E", "Pa", "Young's modulus of rocker, tool and bearings", 2.04e11, min=0.0),
+        Variable("rho", "kg/m3", "Density of the tool", 7850.0, min=0.0),
+        Variable("nu", "1", "Poisson's ratio", 0.3, min=0.0, max=0.5),
+        Variable("V0", "m/s", "Impact speed V0 = omega0 S: start speed when strike_at_start = 1 "
+                 "and the speed the linearised stiffnesses are computed for", 10.0, min=0.0),
+        Variable("k_n", "N(2/3)/m", "Bearing constant of the support, c0 = k_n Tm^(1/3)", 80e6,
+                 min=0.0),
+        Variable("c_contact", "N/m", "Linear contact stiffness c; 0: from the paper's iteration "
+                 "c = 1.25 K^(2/3) Pm^(1/3)", 0.0, min=0.0),
+        Variable("c_support", "N/m", "Support stiffness c0; 0: from the paper's iteration "
+                 "c0 = k_n Tm^(1/3)", 0.0, min=0.0),
+        Variable("iteration_tol", "1", "Relative stop criterion of the stiffness iterations",
+                 1e-3, min=1e-12, max=0.1),
+        Variable("strike_at_start", "1", "1: the rocker touches the tool at the start time with "
+                 "angular speed V0/S; 0: start from theta_start, w_start, tool_gap", 1.0,
+                 min=0.0, max=1.0),
+        Variable("theta_start", "rad", "Rocker angle at the start (strike_at_start = 0); the "
+                 "strike position is theta = tool_gap/S", 0.0),
+        Variable("w_start", "rad/s", "Rocker angular speed at the start (strike_at_start = 0)",
+                 0.0),
+        Variable("tool_gap", "m", "Tool end position at theta = 0 (strike_at_start = 0)", 0.0,
+                 min=0.0),
+    )
+    effects = (
+        Effect("hertz_contact", "Contact P = K delta^1.5 instead of the linearised spring c"),
+        Effect("support_compliance", "Elastic pivot support c0 (off: pinned rocker, "
+                                     "c0 -> infinity, strike-point mass J/S^2)", default=True),
+    )
+    inputs = (
+        Variable("flange_tau", "N.m", "Drive torque on the rocker shaft", 0.0),
+        Variable("flange_J", "kg.m2", "Drive inertia rigidly on the rocker shaft (added to J)",
+                 0.0, min=0.0),
+    )
+    outputs = (
+        Variable("flange_w", "rad/s", "Rocker angular velocity theta'"),
+        Variable("flange_phi", "rad", "Rocker angle theta"),
+        Variable("P", "N", "Contact force rocker - tool"),
+        Variable("T", "N", "Support reaction (force on the support along the tool axis); "
+                 "pinned: -P - m r theta'', which feeds through the drive torque",
+                 depends_on=("flange_tau", "flange_J")),
+        Variable("contact", "1", "1 while the rocker touches the tool, else 0"),
+        Variable("impulse", "N.s", "Impulse of P over the last (or ongoing) impact"),
+        Variable("E_radiated", "J", "Energy radiated into the rod, integral of P^2/Z, cumulative"),
+        Variable("P_peak", "N", "Largest P of the last (or ongoing) impact"),
+        Variable("T_peak", "N", "Largest |T| during the last (or ongoing) impact"),
+        Variable("impact_duration", "s", "Duration of the last impact (elapsed if ongoing)"),
+        Variable("n_impacts", "1", "Number of impacts so far"),
+        Variable("c_contact_used", "N/m", "Linear contact stiffness in use (0 with Hertz)"),
+        Variable("c_support_used", "N/m", "Support stiffness in use (0 when pinned)"),
+    )
+
+    def __init__(self, parameters=None, effects=None):
+        super().__init__(parameters, effects)
+        self._d = self._fresh_discrete(c=0.0, c0=None, contact=False)
+
+    def check(self, p):
+        for name in ("m", "S", "R_c", "d", "E", "rho"):
+            if getattr(p, name) <= 0.0:
+                raise ParameterError(self.model_name, name, getattr(p, name), "> 0")
+        if p.J <= p.m * p.r ** 2:
+            raise ParameterError(self.model_name, "J", p.J,
+                                 f"> m r^2 = {p.m * p.r ** 2:.6g} kg.m2 (inertia about the "
+                                 f"pivot exceeds m r^2 by the central inertia J_C)")
+        if p.nu >= 0.5:
+            raise ParameterError(self.model_name, "nu", p.nu, "< 0.5")
+        if p.strike_at_start not in (0.0, 1.0):
+            raise ParameterError(self.model_name, "strike_at_start", p.strike_at_start, "0 or 1")
+        needs_c = not self.on("hertz_contact") and p.c_contact == 0.0
+        needs_c0 = self.on("support_compliance") and p.c_support == 0.0
+        if (needs_c or needs_c0 or p.strike_at_start == 1.0) and p.V0 <= 0.0:
+            raise ParameterError(self.model_name, "V0", p.V0,
+                                 "> 0 m/s (start speed / speed of the stiffness iteration)")
+        if needs_c0 and p.k_n <= 0.0:
+            raise ParameterError(self.model_name, "k_n", p.k_n,
+                                 "> 0 when support_compliance is on and c_support = 0")
+        if p.strike_at_start == 0.0 and p.S * p.theta_start - p.tool_gap > 0.0:
+            raise ParameterError(self.model_name, "theta_start", p.theta_start,
+                                 f"<= tool_gap/S = {p.tool_gap / p.S:.6g} rad (the rocker may "
+                                 f"not start inside the tool)")
+
+    # -- helpers ---------------------------------------------------------------------------
+    @property
+    def compliant(self) -> bool:
+        return self.on("support_compliance")
+
+    @property
+    def hertz(self) -> bool:
+        return self.on("hertz_contact")
+
+    @property
+    def gap(self) -> float:
+        return 0.0 if self.p.strike_at_start == 1.0 else self.p.tool_gap
+
+    def data(self, flange_J: float = 0.0) -> RockerData:
+        p = self.p
+        return RockerData(J=p.J + flange_J, m=p.m, r=p.r, S=p.S, R_c=p.R_c, d=p.d, E=p.E,
+                          rho=p.rho, nu=p.nu, V0=p.V0, k_n=p.k_n)
+
+    @property
+    def Z(self) -> float:
+        return self.data().Z
+
+    @property
+    def K(self) -> float:
+        return self.data().K
+
+    def _fresh_discrete(self, c, c0, contact):
+        return {"contact": bool(contact), "n_impacts": 1 if contact else 0, "t_start": None,
+                "P_peak": 0.0, "T_peak": 0.0, "duration": 0.0, "c": c, "c0": c0}
+
+    def _split(self, x):
+        """(u0, v0, theta, omega, w, impulse, E_rad) whatever the effects."""
+        if self.compliant:
+            return tuple(x[:7])
+        return (0.0, 0.0) + tuple(x[:5])
+
+    def delta(self, x) -> float:
+        u0, _, th, _, w, _, _ = self._split(x)
+        return u0 + self.p.S * th - w - self.gap
+
+    def contact_force(self, delta: float) -> float:
+        """P for the deflection delta, in contact mode: the smooth extension (c delta, or
+        K |delta|^1.5 sign(delta)) so the integrator sees a smooth right side up to the event."""
+        if self.hertz:
+            return self._K * math.copysign(abs(delta) ** 1.5, delta)
+        return self._d["c"] * delta
+
+    def _force(self, x) -> float:
+        return self.contact_force(self.delta(x)) if self._d["contact"] else 0.0
+
+    def _accelerations(self, x, u, P):
+        """(u0'', theta'', T)."""
+        p = self.p
+        u0, _, _, _, _, _, _ = self._split(x)
+        J_t = p.J + u[1]
+        if self.compliant:
+            T = self._d["c0"] * u0
+            det = p.m * (J_t - p.m * p.r ** 2)
+            f1, f2 = -P - T, -P * p.S + u[0]
+            return (J_t * f1 - p.m * p.r * f2) / det, (p.m * f2 - p.m * p.r * f1) / det, T
+        ddth = (-P * p.S + u[0]) / J_t
+        return 0.0, ddth, -P - p.m * p.r * ddth
+
+    def support_force(self, x, u) -> float:
+        return self._accelerations(x, u, self._force(x))[2]
+
+    def mechanical_energy(self, x, u) -> float:
+        """Kinetic energy of rocker (+ drive inertia) + support and contact potential energy."""
+        p = self.p
+        u0, v, _, om, _, _, _ = self._split(x)
+        J_t = p.J + u[1]
+        E = 0.5 * p.m * v * v + p.m * p.r * v * om + 0.5 * J_t * om * om
+        if self.compliant:
+            E += 0.5 * self._d["c0"] * u0 * u0
+        if self._d["contact"]:
+            dl = max(self.delta(x), 0.0)
+            E += 0.4 * self._K * dl ** 2.5 if self.hertz else 0.5 * self._d["c"] * dl * dl
+        return E
+
+    @property
+    def _K(self) -> float:
+        K = getattr(self, "_K_cache", None)
+        if K is None:
+            K = self._K_cache = self.K
+        return K
+
+    @property
+    def _nominal(self) -> np.ndarray:
+        """Scales for atol: lengths V0 * 0.1 ms, speeds V0, impulse/energy of a 10 kg mass."""
+        V = max(self.p.V0, 1.0)
+        L, S = V * 1e-4, self.p.S
+        scale = [L, V, L / S, V / S, L, 10.0 * V, 5.0 * V * V]
+        return np.array(scale if self.compliant else scale[2:])
+
+    # -- contract --------------------------------------------------------------------------
+    def state_names(self):
+        rocker = ("theta", "omega", "w_tool", "impulse", "E_radiated")
+        return (("u0", "v0") + rocker) if self.compliant else rocker
+
+    def stiffnesses(self, flange_J: float = 0.0) -> tuple[float, float | None]:
+        """(c, c0) in use: parameters if given, else the paper's iterations (c0 None: pinned)."""
+        p = self.p
+        c = 0.0 if self.hertz else p.c_contact
+        c0 = p.c_support if self.compliant else None
+        if (c == 0.0 and not self.hertz) or c0 == 0.0:
+            lin = linearise(self.data(flange_J), pinned=not self.compliant, rtol=p.iteration_tol)
+            c = lin.c if (c == 0.0 and not self.hertz) else c
+            c0 = lin.c0 if c0 == 0.0 else c0
+        return float(c), (None if c0 is None else float(c0))
+
+    def initial_state(self, u):
+        p = self.p
+        self._K_cache, self._Z_cache = self.K, self.Z   # parameters are fixed from here on
+        c, c0 = self.stiffnesses(float(u[1]))
+        if p.strike_at_start == 1.0:
+            theta, omega = 0.0, p.V0 / p.S
+        else:
+            theta, omega = p.theta_start, p.w_start
+        x = np.array(([0.0, 0.0] if self.compliant else []) + [theta, omega, 0.0, 0.0, 0.0])
+        d0 = p.S * theta - self.gap
+        touching = d0 > 0.0 or (d0 == 0.0 and omega > 0.0)
+        self._d = self._fresh_discrete(c, c0, touching)
+        return x
+
+    def derivatives(self, t, x, u):
+        P = self._force(x)
+        ddu, ddth, _ = self._accelerations(x, u, P)
+        _, v, _, om, _, _, _ = self._split(x)
+        Z = self._Z
+        rocker = [om, ddth, P / Z, P, P * P / Z]
+        return np.array(([v, ddu] if self.compliant else []) + rocker)
+
+    @property
+    def _Z(self) -> float:
+        Z = getattr(self, "_Z_cache", None)
+        if Z is None:
+            Z = self._Z_cache = self.Z
+        return Z
+
+    def output_values(self, t, x, u):
+        d = self._d
+        P = max(self._force(x), 0.0)
+        T = self._accelerations(x, u, P)[2]
+        _, _, th, om, _, imp, E_rad = self._split(x)
+        if d["contact"]:
+            duration = 0.0 if d["t_start"] is None else t - d["t_start"]
+            P_peak, T_peak = max(d["P_peak"], P), max(d["T_peak"], abs(T))
+        else:
+            duration, P_peak, T_peak = d["duration"], d["P_peak"], d["T_peak"]
+        return np.array([om, th, P, T, 1.0 if d["contact"] else 0.0, imp, E_rad, P_peak,
+                         T_peak, duration, float(d["n_impacts"]), d["c"] or 0.0,
+                         d["c0"] or 0.0], dtype=float)
+
+    # -- hybrid part -----------------------------------------------------------------------
+    def event_functions(self, u_of_t):
+        """The mode switch: contact begins (delta rises through 0) or ends (falls to 0)."""
+        def switch(t, x):
+            return self.delta(x)
+        switch.terminal = True
+        switch.direction = -1.0 if self._d["contact"] else 1.0
+        return [switch]
+
+    def monitor_functions(self, u_of_t):
+        """Non-terminal events located during contact for the exact peaks: delta' = 0 (P' = 0)
+        and, with the elastic support, u0' = 0 (T' = 0)."""
+        if not self._d["contact"]:
+            return []
+
+        def p_peak(t, x):
+            _, v, _, om, _, _, _ = self._split(x)
+            return v + self.p.S * om - self._force(x) / self._Z
+        p_peak.terminal, p_peak.direction = False, -1.0
+        if not self.compliant:
+            return [p_peak]
+
+        def t_extremum(t, x):
+            return x[1]
+        t_extremum.terminal, t_extremum.direction = False, 0.0
+        return [p_peak, t_extremum]
+
+    def observe(self, t, x, u) -> None:
+        """Fold P and |T| at (t, x) into the peaks of the ongoing impact."""
+        d = self._d
+        if not d["contact"]:
+            return
+        P = max(self._force(x), 0.0)
+        T = self._accelerations(x, u, P)[2]
+        d["P_peak"] = max(d["P_peak"], P)
+        d["T_peak"] = max(d["T_peak"], abs(T))
+
+    def on_event(self, t, x, u, index):
+        d = self._d
+        x = np.array(x, dtype=float)
+        if d["contact"]:          # end of contact: P returned to zero
+            self.observe(t, x, u)
+            d["contact"] = False
+            d["duration"] = t - (d["t_start"] if d["t_start"] is not None else t)
+        else:                     # contact begins: a new impact, fresh statistics
+            d.update(contact=True, n_impacts=d["n_impacts"] + 1, t_start=t, P_peak=0.0,
+                     T_peak=0.0, duration=0.0)
+            x[self.state_names().index("impulse")] = 0.0
+            self.observe(t, x, u)
+        return x
+
+    def discrete_state(self) -> dict:
+        return dict(self._d)
+
+    def set_discrete_state(self, state: dict) -> None:
+        self._d = dict(state)
+
+    def advance(self, t0, x0, h, u_of_t, rtol, atol):
+        """Integrate from t0 to t0 + h with the mode switches as terminal events and the force
+        extrema as non-terminal events (atol is relative to the nominal state scales)."""
+        if h <= 0.0:
+            return np.asarray(x0, dtype=float)
+        t, x, t_end = t0, np.array(x0, dtype=float), t0 + h
+        if self._d["contact"] and self._d["t_start"] is None:
+            self._d["t_start"] = t0
+        atol_v = atol * self._nominal
+        for _ in range(self.max_events_per_step):
+            switch = self.event_functions(u_of_t)
+            monitors = self.monitor_functions(u_of_t)
+            sol = solve_ivp(lambda s, y: self.derivatives(s, y, u_of_t(s)), (t, t_end), x,
+                            method=self.integrator, rtol=rtol, atol=atol_v,
+                            events=switch + monitors)
+            if sol.status < 0:
+                raise IntegrationError(f"{self.model_name}: {sol.message} at t = {t:.9g} s")
+            for k in range(1, len(sol.t_events)):
+                for te, ye in zip(sol.t_events[k], sol.y_events[k]):
+                    self.observe(te, ye, u_of_t(te))
+            if sol.status == 0:
+                x = sol.y[:, -1]
+                self.observe(t_end, x, u_of_t(t_end))
+                return x
+            t, x = float(sol.t_events[0][0]), sol.y_events[0][0]
+            x = self.on_event(t, x, u_of_t(t), 0)
+            if t >= t_end:
+                return x
+        raise IntegrationError(f"{self.model_name}: more than {self.max_events_per_step} "
+                               f"contact changes in one step at t = {t:.9g} s (chattering)")

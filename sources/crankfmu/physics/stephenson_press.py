@@ -1,0 +1,174 @@
+"""Stephenson six-bar crank press (seed stephenson_press_servo_drive, eq. 1-3, 21-22).
+
+Coordinates: x horizontal, y downward, crank centre O at the origin. The crank pin A is at
+(r cos phi, r sin phi); the base link 2 has its centre at A and moves in circular translation;
+the two parallel rods 3, 4 (length l) join it to the slider 5 on the vertical through O:
+
+    cos psi = -r cos(phi)/l,  sin psi = +sqrt(1 - cos^2 psi)   (rod angle, 0 < psi < pi)
+    S   = r sin(phi) + l sin(psi)                              (slider, BDC at phi = pi/2)
+    psi'  = -(r/l) sin(phi)/sin(psi)
+    psi'' = -[(r/l) cos(phi) + psi'^2 cos(psi)]/sin(psi)       (printed eq. 3 has a sign error)
+    S'  = r cos(phi) + l psi' cos(psi)
+    S'' = -r sin(phi) - l psi'^2 sin(psi) + l psi'' cos(psi)
+
+Reduced inertia and its derivative (eq. 2, 22; ' is d/dphi):
+    J(phi)    = J_c + m5 S'^2 [+ rods],   J_c = i^2 J_input + J1 + m2 r^2
+    J'(phi)/2 = m5 S' S''     [+ rods]
+Rods (effect rod_inertia): two uniform bars, centre C = A/2 + (0, (l/2) sin psi) relative to the
+slider line, each adding m_rod |C'|^2 + (m_rod l^2/12) psi'^2 to J and m_rod C'.C'' +
+(m_rod l^2/12) psi' psi'' to J'/2.
+
+Motion (eq. 1):  J(phi) phi'' + J'(phi)/2 phi'^2 = i M_D + M_C(phi)
+    M_C = (G5 - F5) S' + G2 r cos(phi) [+ 2 m_rod g y_C']  (gravity terms: effect gravity)
+Forging force (effect forging_load): F5 = F_max sin(pi x/forging_angle) for
+x = phi - (pi/2 - forging_angle) (mod 2 pi) in [0, forging_angle], else 0 (the window ends at BDC).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .base import Effect, ParameterError, PhysicsModel, Variable
+
+G_STANDARD = 9.80665  # m/s^2
+
+
+class StephensonPress(PhysicsModel):
+    model_name = "StephensonPress"
+    description = "Stephenson six-bar crank press: one-DOF reduced dynamics of the crank"
+    seed = "stephenson_press_servo_drive.txt, eq. (1)-(3), (21)-(22)"
+    integrator = "DOP853"
+
+    parameters = (
+        Variable("r", "m", "Crank radius", 0.05, min=0.0),
+        Variable("l", "m", "Length of the parallel rods 3 and 4 (must exceed r)", 0.25, min=0.0),
+        Variable("J1", "kg.m2", "Crank inertia about O", 2.0, min=0.0),
+        Variable("m2", "kg", "Mass of base link 2 (centre at hinge A)", 20.0, min=0.0),
+        Variable("m5", "kg", "Slider mass", 50.0, min=0.0),
+        Variable("m_rod", "kg", "Mass of each rod (used with effect rod_inertia)", 5.0, min=0.0),
+        Variable("gear_ratio", "1", "Gear ratio i = motor speed / crank speed", 10.0, min=0.0),
+        Variable("F_max", "N", "Forging force amplitude (effect forging_load)", 50e3, min=0.0),
+        Variable("forging_angle", "rad", "Crank angle of the forging window ending at BDC",
+                 math.radians(30.0), min=0.0, max=2 * math.pi),
+        Variable("g", "m/s2", "Gravitational acceleration (effect gravity)", G_STANDARD, min=0.0),
+        Variable("phi_start", "rad", "Crank angle at the start time", 0.0),
+        Variable("w_start", "rad/s", "Crank angular velocity at the start time", 0.0),
+    )
+    effects = (
+        Effect("gravity", "Weights of slider, base link (and rods) in M_C"),
+        Effect("forging_load", "Half-sine forging force on the slider over the window"),
+        Effect("rod_inertia", "Mass and inertia of the two rods in J(phi) and M_C"),
+    )
+    inputs = (
+        Variable("flange_tau", "N.m", "Drive torque M_D on the motor shaft", 0.0),
+        Variable("flange_J", "kg.m2", "Inertia rigidly on the motor shaft (J_input)", 0.0,
+                 min=0.0),
+    )
+    outputs = (
+        Variable("flange_w", "rad/s", "Motor shaft angular velocity i*phi'"),
+        Variable("flange_phi", "rad", "Motor shaft angle i*phi"),
+        Variable("phi", "rad", "Crank angle (continuous, not wrapped)"),
+        Variable("w_crank", "rad/s", "Crank angular velocity phi'"),
+        Variable("slider_s", "m", "Slider position S, downward, r + l at BDC"),
+        Variable("slider_v", "m/s", "Slider velocity S' phi'"),
+        Variable("F5", "N", "Forging force on the slider"),
+        Variable("J_reduced", "kg.m2", "Reduced inertia J(phi) at the crank",
+                 depends_on=("flange_J",)),
+        Variable("M_C", "N.m", "Reduced resistance moment M_C(phi) at the crank"),
+    )
+
+    def check(self, p):
+        if p.r <= 0.0:
+            raise ParameterError(self.model_name, "r", p.r, "> 0 m")
+        if p.l <= p.r:
+            raise ParameterError(self.model_name, "l", p.l,
+                                 f"> r = {p.r} m (a rod shorter than the crank cannot assemble)")
+        if p.gear_ratio <= 0.0:
+            raise ParameterError(self.model_name, "gear_ratio", p.gear_ratio, "> 0")
+        if self.on("forging_load") and p.forging_angle <= 0.0:
+            raise ParameterError(self.model_name, "forging_angle", p.forging_angle,
+                                 "> 0 rad when effect forging_load is on")
+
+    # -- kinematics ------------------------------------------------------------------------
+    def kinematics(self, phi):
+        """(S, S', S'', psi, psi', psi'') for scalar or array phi."""
+        r, l = self.p.r, self.p.l
+        cos_psi = -r * np.cos(phi) / l
+        sin_psi = np.sqrt(1.0 - cos_psi ** 2)
+        psi = np.arctan2(sin_psi, cos_psi)
+        dpsi = -(r / l) * np.sin(phi) / sin_psi
+        ddpsi = -((r / l) * np.cos(phi) + dpsi ** 2 * cos_psi) / sin_psi
+        S = r * np.sin(phi) + l * sin_psi
+        dS = r * np.cos(phi) + l * dpsi * cos_psi
+        ddS = -r * np.sin(phi) - l * dpsi ** 2 * sin_psi + l * ddpsi * cos_psi
+        return S, dS, ddS, psi, dpsi, ddpsi
+
+    def rod_centre_velocity(self, phi):
+        """(C', C'') of a rod's centre of mass, each as (x, y) arrays over phi."""
+        r, l = self.p.r, self.p.l
+        _, _, _, psi, dpsi, ddpsi = self.kinematics(phi)
+        dC = (-0.5 * r * np.sin(phi), r * np.cos(phi) + 0.5 * l * np.cos(psi) * dpsi)
+        ddC = (-0.5 * r * np.cos(phi),
+               -r * np.sin(phi) + 0.5 * l * (ddpsi * np.cos(psi) - dpsi ** 2 * np.sin(psi)))
+        return dC, ddC
+
+    def J_constant(self, J_input: float) -> float:
+        """J_c = i^2 J_input + J1 + m2 r^2 (base link in circular translation, eq. 21-22)."""
+        p = self.p
+        return p.gear_ratio ** 2 * J_input + p.J1 + p.m2 * p.r ** 2
+
+    def reduced_inertia(self, phi, J_input: float):
+        """(J(phi), J'(phi)/2) at the crank."""
+        p = self.p
+        _, dS, ddS, _, dpsi, ddpsi = self.kinematics(phi)
+        J = self.J_constant(J_input) + p.m5 * dS ** 2
+        half_dJ = p.m5 * dS * ddS
+        if self.on("rod_inertia"):
+            (dCx, dCy), (ddCx, ddCy) = self.rod_centre_velocity(phi)
+            J_rod = p.m_rod * p.l ** 2 / 12.0
+            J = J + 2.0 * (p.m_rod * (dCx ** 2 + dCy ** 2) + J_rod * dpsi ** 2)
+            half_dJ = half_dJ + 2.0 * (p.m_rod * (dCx * ddCx + dCy * ddCy) + J_rod * dpsi * ddpsi)
+        return J, half_dJ
+
+    def forging_force(self, phi):
+        p = self.p
+        if not self.on("forging_load"):
+            return np.zeros_like(np.asarray(phi, dtype=float))
+        x = np.mod(np.asarray(phi, dtype=float) - (0.5 * math.pi - p.forging_angle), 2 * math.pi)
+        inside = x <= p.forging_angle
+        return np.where(inside, p.F_max * np.sin(math.pi * np.minimum(x, p.forging_angle)
+                                                 / p.forging_angle), 0.0)
+
+    def resistance_moment(self, phi):
+        """M_C(phi) at the crank: forging force and weights (their generalized forces)."""
+        p = self.p
+        _, dS, _, _, _, _ = self.kinematics(phi)
+        M = -self.forging_force(phi) * dS
+        if self.on("gravity"):
+            M = M + p.m5 * p.g * dS + p.m2 * p.g * p.r * np.cos(phi)
+            if self.on("rod_inertia"):
+                (_, dCy), _ = self.rod_centre_velocity(phi)
+                M = M + 2.0 * p.m_rod * p.g * dCy
+        return M
+
+    # -- contract --------------------------------------------------------------------------
+    def state_names(self):
+        return ("phi", "w_crank")
+
+    def initial_state(self, u):
+        return np.array([self.p.phi_start, self.p.w_start])
+
+    def derivatives(self, t, x, u):
+        phi, w = x
+        J, half_dJ = self.reduced_inertia(phi, u[1])
+        dw = (self.p.gear_ratio * u[0] + self.resistance_moment(phi) - half_dJ * w * w) / J
+        return np.array([w, dw])
+
+    def output_values(self, t, x, u):
+        phi, w = x
+        i = self.p.gear_ratio
+        S, dS = self.kinematics(phi)[:2]
+        J, _ = self.reduced_inertia(phi, u[1])
+        return np.array([i * w, i * phi, phi, w, S, dS * w, self.forging_force(phi), J,
+                         self.resistance_moment(phi)], dtype=float)

@@ -1,0 +1,1 @@
+"""FMI plumbing: one generic pythonfmu adapter serves every physics model."""

@@ -1,0 +1,403 @@
+"""Planetary clutch drive + induction motor: engagement, stopping, energy, stick-slip.
+
+Scene: the brief's drive (PlanetaryClutchDrive defaults) with a 5.5 kW, 1000 rpm induction motor
+(lambda_k = 2.2) whose rotor and flywheel are counted in J_a (motor J = 0). Command at t = 0 from
+the steady state. Three independent ways to the same numbers (tests/planetary_reference.py):
+
+* REF: a monolithic motor + drive ODE in Newton-Euler form (tooth force as unknown), event
+  location with DOP853 at rtol = atol = 1e-12;
+* CF (linear motor law only): piecewise matrix exponentials of the augmented LTI pieces;
+* MODEL: PlanetaryClutchDrive.advance over h = 1 ms communication steps (rtol = atol = 1e-10),
+  motor torque fed through u_of_t: 'iterated' (linear in time over the step, step repeated with
+  rollback of the model's discrete state until the end torque is a fixed point; the coupling
+  error is then O(h^2)) and 'zoh' (torque held from the step start; O(h)).
+
+Tolerances and why:
+* MODEL(iterated) vs REF: 1e-4 relative in times and speeds, 1e-3 in energies (the brief's
+  figures). Measured: about 6e-8 in times, 5e-7 in energies: the residual is the O(h^2) error of
+  the linear-in-time motor torque inside each step (h = 1 ms, dM/dw = 10 N m s) plus the
+  internal tolerance 1e-10.
+* MODEL(zoh) vs REF: the held torque lags by h/2 on average, an O(h) coupling error:
+  |dM/dt| h/2 ~ 30 N m/s * 0.5 ms = 0.015 N m against brake torques of 1000 N m and the holding
+  torque's sensitivity to M_A (factor 1+p); measured 1e-4 relative. Asserted at 5e-4 (5x the
+  measured value, still far below what a wrong event or lock would cause).
+* CF vs REF: 1e-9 (both are accurate to ~1e-13; brentq on expm to machine precision).
+* Energy balance: W_sun = E_brake_b + E_brake_h + E_resist + dE_kin to 1e-6 relative to the
+  dissipated energy (the quadratures are integrated with the states at rtol 1e-10).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import planetary_reference as R
+from crankfmu.physics.base import ParameterError, held
+from crankfmu.physics.induction_motor import InductionMotor
+from crankfmu.physics.planetary_drive import PlanetaryClutchDrive, steady_state
+
+T_END = 0.4   # s: engagement and stopping end near 0.17 s; the rest checks the held phase
+H = 1e-3      # s: communication step
+TIME_TOL, ENERGY_TOL = 1e-4, 1e-3
+ZOH_TOL = 5e-4
+
+
+def make(scene: str, linear: bool, effects=(), **over):
+    motor = InductionMotor(R.MOTOR, ["linear_law"] if linear else [])
+    period = 1 if scene == "engage" else 3
+    ss = steady_state(PlanetaryClutchDrive(R.DRIVE), motor, period)
+    params = dict(R.DRIVE, w_a_start=ss["w_a"], initial_period=period, **over)
+    return PlanetaryClutchDrive(params, list(effects)), motor
+
+
+def model_run(scene, linear, coupling, effects=(), **over):
+    drive, motor = make(scene, linear, effects, **over)
+    out, rows, its = R.run_model(drive, motor.torque, 1.0 if scene == "engage" else 0.0, T_END,
+                                 H, coupling)
+    return drive, out, rows, its
+
+
+@pytest.fixture(scope="module")
+def runs():
+    """All runs once per module: {(scene, linear, kind): result}."""
+    res = {}
+    for scene in ("engage", "stop"):
+        for linear in (False, True):
+            res[scene, linear, "ref"] = R.reference_run(scene, linear, T_END)
+            for coupling in ("iterated", "zoh"):
+                res[scene, linear, coupling] = model_run(scene, linear, coupling)
+            if linear:
+                res[scene, linear, "cf"] = R.closed_form(scene, T_END)
+    return res
+
+
+def key_times(scene, out):
+    """(break-free time of the released member, lock time of the braked member)."""
+    if scene == "engage":  # carrier h breaks free, ring b locks: engagement time
+        return out["t_slip_h"], out["t_lock_b"]
+    return out["t_slip_b"], out["t_lock_h"]  # ring breaks free, carrier locks: stopping time
+
+
+def rel(a, b):
+    return abs(a - b) / abs(b)
+
+
+# -- the motor -----------------------------------------------------------------------------
+def test_induction_motor_nameplate_and_laws():
+    m = InductionMotor(R.MOTOR)
+    w_n, w_s = 960 * math.pi / 30, 1000 * math.pi / 30
+    assert m.torque(w_n) == pytest.approx(5500 / w_n, rel=1e-12)        # M(s_n) = M_n
+    w_k = w_s * (1 - m.s_k)
+    assert m.torque(w_k) == pytest.approx(2.2 * 5500 / w_n, rel=1e-12)  # M(s_k) = M_k
+    assert m.dtorque_dw(w_k) == pytest.approx(0.0, abs=1e-9)
+    assert m.torque(w_s) == 0.0
+    for M in (0.0, 6.2, 16.4, 50.0, 100.0):
+        assert m.torque(m.speed_at_torque(M)) == pytest.approx(M, abs=1e-10)
+        assert m.speed_at_torque(M) >= w_k  # stable branch
+    lin = InductionMotor(R.MOTOR, ["linear_law"])
+    for w in (95.0, 104.0, 110.0):  # the linear law is Kloss's tangent at s = 0
+        s = 1 - w / w_s
+        assert lin.torque(w) == pytest.approx(2 * m.M_k * s / m.s_k, rel=1e-13)
+        assert lin.torque(lin.speed_at_torque(lin.torque(w))) == pytest.approx(lin.torque(w))
+    assert m.dtorque_dw(w_s) == pytest.approx(lin.dtorque_dw(w_s), rel=1e-12)
+    y = m.output_values(0.0, np.zeros(0), np.array([w_n, 0.0]))
+    assert y[0] == pytest.approx(m.M_n) and y[1] == 0.0 and y[3] == pytest.approx(5500.0)
+    with pytest.raises(ParameterError, match="lambda_k"):
+        InductionMotor({"lambda_k": 1.0})
+    with pytest.raises(ParameterError, match="n_rated"):
+        InductionMotor({"n_rated": 1000.0})
+    with pytest.raises(ParameterError, match="P_rated"):
+        InductionMotor({"P_rated": 0.0})
+    with pytest.raises(ValueError, match="breakdown"):
+        m.speed_at_torque(1.01 * m.M_k)
+
+
+def test_drive_parameter_validation():
+    with pytest.raises(ParameterError, match="r_b"):
+        PlanetaryClutchDrive({"r_b": 0.1})
+    with pytest.raises(ParameterError, match="initial_period"):
+        PlanetaryClutchDrive({"initial_period": 2.0})
+    with pytest.raises(ParameterError, match="alpha_b"):
+        PlanetaryClutchDrive({"alpha_b": 0.0})
+    with pytest.raises(ParameterError, match="z_h"):
+        PlanetaryClutchDrive({"z_h": 0.0}, ["power_law"])
+    with pytest.raises(KeyError):
+        PlanetaryClutchDrive({"p": 2.5})
+
+
+# -- steady states -------------------------------------------------------------------------
+@pytest.mark.parametrize("period", [1, 3])
+def test_steady_states_from_the_equations(period):
+    """The closed-form steady torques (idle M_ca + M_cb/p, stroke M_ca + M_ch/(1+p)) make every
+    acceleration vanish, and agree with a root of the model's own equations of motion."""
+    from scipy.optimize import brentq
+    motor = InductionMotor(R.MOTOR)
+    drive = PlanetaryClutchDrive(R.DRIVE)
+    p = 2.5
+    expected = 5.0 + 3.0 / p if period == 1 else 5.0 + 40.0 / (1 + p)
+    assert drive.steady_sun_torque(period) == pytest.approx(expected, rel=1e-15)
+    ss = steady_state(drive, motor, period)
+    d = PlanetaryClutchDrive(dict(R.DRIVE, w_a_start=ss["w_a"], initial_period=period))
+    u = np.array([0.0 if period == 1 else 1.0, motor.torque(ss["w_a"]), 0, 0, 0])
+    x = d.initial_state(u)
+    dx = d.derivatives(0.0, x, u)
+    assert np.max(np.abs(dx[2:4])) < 1e-12
+    free = 2 if period == 1 else 3  # the free member's acceleration as a function of torque
+
+    def acc(M):
+        return d.derivatives(0.0, x, np.array([u[0], M, 0, 0, 0]))[free]
+    assert brentq(acc, 0.0, 50.0, xtol=1e-14) == pytest.approx(expected, rel=1e-12)
+    y = dict(zip([v.name for v in d.outputs], d.output_values(0.0, x, u)))
+    held_tau = y["tau_h"] if period == 1 else y["tau_b"]
+    assert held_tau == pytest.approx(ss["holding_torque"], rel=1e-12)
+    assert abs(held_tau) < (1500 + 40 if period == 1 else 1000 + 3)
+    assert y["period"] == period
+    assert ss["w_a"] == pytest.approx(R.initial_speeds("engage" if period == 1 else "stop",
+                                                       R.motor_law(False))[0], rel=1e-13)
+
+
+# -- engagement and stopping against the monolithic reference ---------------------------------
+@pytest.mark.parametrize("scene", ["engage", "stop"])
+@pytest.mark.parametrize("linear", [False, True])
+def test_against_monolithic_reference(runs, scene, linear):
+    ref = runs[scene, linear, "ref"]
+    _, out, rows, its = runs[scene, linear, "iterated"]
+    k_dir = ref["events"][0][3]
+    # the expected sequence: released member breaks free, braked member locks, nothing else
+    assert [e[1:3] for e in ref["events"]] == (
+        [("slip", "h"), ("lock", "b")] if scene == "engage" else [("slip", "b"), ("lock", "h")])
+    assert k_dir == (1 if scene == "engage" else -1)  # carrier forwards, ring backwards
+    m_slip, m_lock = key_times(scene, out)
+    assert rel(m_slip, ref["events"][0][0]) < TIME_TOL
+    assert rel(m_lock, ref["events"][1][0]) < TIME_TOL
+    for k in ("E_brake_b", "E_brake_h", "E_resist"):
+        assert rel(out[k], ref[k]) < ENERGY_TOL, k
+    assert rel(out["W_sun"], ref["W_motor"]) < ENERGY_TOL
+    for k in ("w_a", "w_b", "w_h"):
+        if scene == "engage" and k == "w_b" or scene == "stop" and k == "w_h":
+            assert out[k] == 0.0  # locked: exactly zero
+        else:
+            assert rel(out[k], ref[k]) < TIME_TOL, k
+    assert out["period"] == (3 if scene == "engage" else 1)
+    assert out["n_events"] == 3  # the command edge, one break-free, one lock
+    assert max(its) <= 6
+
+
+@pytest.mark.parametrize("scene", ["engage", "stop"])
+def test_held_torque_coupling_difference(runs, scene):
+    """ZOH motor torque (one advance per step, no iteration): an O(h) coupling error."""
+    ref = runs[scene, False, "ref"]
+    _, out, _, _ = runs[scene, False, "zoh"]
+    _, out_it, _, _ = runs[scene, False, "iterated"]
+    diffs = {"t_slip": rel(key_times(scene, out)[0], ref["events"][0][0]),
+             "t_lock": rel(key_times(scene, out)[1], ref["events"][1][0]),
+             "E_brake_b": rel(out["E_brake_b"], ref["E_brake_b"]),
+             "E_brake_h": rel(out["E_brake_h"], ref["E_brake_h"]),
+             "w_a": rel(out["w_a"], ref["w_a"])}
+    print(f"\nZOH coupling, {scene}: " + ", ".join(f"{k} {v:.2e}" for k, v in diffs.items()))
+    assert max(diffs.values()) < ZOH_TOL
+    # and it is the coupling, not the model: the iterated run is >100x closer
+    assert rel(key_times(scene, out_it)[1], ref["events"][1][0]) < 0.01 * max(diffs["t_lock"],
+                                                                               1e-6)
+
+
+# -- closed form with the linear motor law -------------------------------------------------
+@pytest.mark.parametrize("scene", ["engage", "stop"])
+def test_linear_law_closed_form(runs, scene):
+    cf, ref = runs[scene, True, "cf"], runs[scene, True, "ref"]
+    _, out, _, _ = runs[scene, True, "iterated"]
+    assert rel(cf["t_slip"], ref["events"][0][0]) < 1e-9
+    assert rel(cf["t_lock"], ref["events"][1][0]) < 1e-9
+    assert cf["slip_direction"] == ref["events"][0][3]
+    for k in ("w_a", "w_b" if scene == "stop" else "w_h"):
+        assert rel(cf[k], ref[k]) < 1e-9, k
+    assert cf["hold_margin"] > 0  # the lock holds to the end of the run
+    m_slip, m_lock = key_times(scene, out)
+    assert rel(m_slip, cf["t_slip"]) < TIME_TOL
+    assert rel(m_lock, cf["t_lock"]) < TIME_TOL
+    print(f"\nclosed form {scene}: break-free {cf['t_slip']:.9f} s, lock {cf['t_lock']:.9f} s, "
+          f"model {m_slip:.9f} / {m_lock:.9f} s")
+
+
+def initial_kinetic_energy(scene):
+    drive, _ = make(scene, False)
+    x0 = drive.initial_state(np.zeros(5))
+    return drive.kinetic_energy(x0, np.zeros(5))
+
+
+# -- energy --------------------------------------------------------------------------------
+@pytest.mark.parametrize("scene", ["engage", "stop"])
+@pytest.mark.parametrize("coupling", ["iterated", "zoh"])
+def test_energy_balance(runs, scene, coupling):
+    """Work in through the sun = brake losses + resistance losses + change of kinetic energy."""
+    drive, out, rows, _ = runs[scene, False, coupling]
+    names = [v.name for v in drive.outputs]
+    E0 = initial_kinetic_energy(scene)
+    dissipated = out["E_brake_b"] + out["E_brake_h"] + out["E_resist"]
+    residual = out["W_sun"] + out["W_flange"] - dissipated - (out["E_kin"] - E0)
+    assert abs(residual) < 1e-6 * dissipated
+    ref = runs[scene, False, "ref"]
+    ref_res = ref["W_motor"] - ref["E_brake_b"] - ref["E_brake_h"] - ref["E_resist"] - \
+        ref["dE_kin"]
+    assert abs(ref_res) < 1e-9 * dissipated
+    # along the run too (every 50th step)
+    i = {k: names.index(k) for k in ("W_sun", "E_brake_b", "E_brake_h", "E_resist", "E_kin")}
+    for row in rows[::50]:
+        res = row[i["W_sun"]] - row[i["E_brake_b"]] - row[i["E_brake_h"]] - \
+            row[i["E_resist"]] - (row[i["E_kin"]] - E0)
+        assert abs(res) < 1e-6 * dissipated
+
+
+# -- stick-slip ----------------------------------------------------------------------------
+def test_locked_speed_exactly_zero_and_no_events_while_held():
+    """Idle for 2 s: the carrier stays at exactly 0.0, no event at all; after engagement the
+    ring stays at exactly 0.0 through every step of the working stroke."""
+    drive, motor = make("engage", False)
+    samples = []
+    out, rows, _ = R.run_model(drive, motor.torque, 0.0, 2.0, 0.01, "zoh",
+                               sample=lambda d, t, x: samples.append((x[1], x[3])))
+    assert all(phi_h == 0.0 and w_h == 0.0 for phi_h, w_h in samples)
+    assert out["n_events"] == 0 and out["period"] == 1
+    drive, out, rows, _ = runs_cache_engage()
+    names = [v.name for v in drive.outputs]
+    locked = [r for r in rows if r[names.index("period")] == 3]
+    assert len(locked) > 200
+    assert all(r[names.index("w_b")] == 0.0 for r in locked)
+
+
+_cache = {}
+
+
+def runs_cache_engage():
+    if "e" not in _cache:
+        _cache["e"] = model_run("engage", False, "zoh")
+    return _cache["e"]
+
+
+def pulsed_load(A=2500.0, period=0.25, width=0.06, n=4):
+    def f(t):
+        tm = t % period
+        if t < n * period and tm < width:
+            return (-A * math.sin(math.pi * tm / width) ** 2, 0.0)
+        return (0.0, 0.0)
+    return f
+
+
+def test_stick_slip_under_pulsed_press_load():
+    """Working stroke, ring held; four forging pulses on the carrier (2500 N m peak) exceed the
+    ring brake's capacity: the ring slips backwards and re-locks after each pulse. Each lock
+    costs exactly two events (break-free + lock), the locked speed is exactly 0.0 at every
+    step, and the slip energy goes to brake b."""
+    drive, motor = make("stop", False)
+    states = []
+    out, rows, _ = R.run_model(drive, motor.torque, 1.0, 1.2, H, "zoh",
+                               u_extra=pulsed_load(),
+                               sample=lambda d, t, x: states.append((t, d.d["dir_b"], x[2])))
+    d = out["discrete"]
+    assert d["n_lock_b"] == 4 and d["n_slip_b"] == 4
+    assert d["n_pass"] == 0 and d["n_events"] == 8  # no command edge: input command stays 1
+    assert all(w == 0.0 for t, mode, w in states if mode == 0)
+    slipping = [t for t, mode, w in states if mode != 0]
+    assert 0.01 < len(slipping) * H < 0.3  # it slipped, for a bounded time per pulse
+    assert all(w < 0 for t, mode, w in states if mode != 0)  # backwards
+    assert out["E_brake_b"] > 10.0 and out["period"] == 3
+    dissipated = out["E_brake_b"] + out["E_brake_h"] + out["E_resist"]
+    assert out["W_flange"] < -100.0  # the press took work out of the carrier
+    residual = out["W_sun"] + out["W_flange"] - dissipated - \
+        (out["E_kin"] - initial_kinetic_energy("stop"))
+    assert abs(residual) < 1e-6 * dissipated
+
+
+def test_rollback_reproduces_the_step_bitwise():
+    """discrete_state/set_discrete_state restore everything advance depends on."""
+    drive, motor = make("engage", False)
+    u = np.array([1.0, motor.torque(drive.p.w_a_start), 0, 0, 0])
+    x = drive.initial_state(u)
+    for i in range(100):  # into period 2
+        x = drive.advance(i * H, x, H, held(u), 1e-10, 1e-10)
+    saved = drive.discrete_state()
+    import json
+    saved = json.loads(json.dumps(saved))  # what an FMU state save goes through
+    results = []
+    for _ in range(2):
+        drive.set_discrete_state(saved)
+        y = x.copy()
+        for i in range(100, 200):  # crosses the lock of the ring
+            y = drive.advance(i * H, y, H, held(u), 1e-10, 1e-10)
+        results.append((y.copy(), drive.discrete_state()))
+    assert np.array_equal(results[0][0], results[1][0])
+    assert results[0][1] == results[1][1]
+    assert results[0][1]["n_lock_b"] == 1
+
+
+def test_motor_start_from_rest_both_members_locked():
+    """At rest with the carrier brake on, both members are locked (w_a = 0); the motor's
+    starting torque breaks the ring free backwards and the drive runs up to the idle state."""
+    drive = PlanetaryClutchDrive(dict(R.DRIVE, w_a_start=0.0, initial_period=1))
+    motor = InductionMotor(R.MOTOR)
+    u0 = np.array([0.0, 0.0, 0, 0, 0])
+    drive.initial_state(u0)
+    assert drive.d["dir_b"] == 0 and drive.d["dir_h"] == 0  # both held with no torque
+    out, rows, _ = R.run_model(drive, motor.torque, 0.0, 3.0, 0.01, "zoh")
+    ss = steady_state(drive, motor, 1)
+    assert out["discrete"]["n_slip_b"] == 1 and out["discrete"]["dir_b"] == -1
+    assert out["w_h"] == 0.0 and out["period"] == 1
+    assert out["w_a"] == pytest.approx(ss["w_a"], rel=1e-3)
+
+
+# -- brake laws, command events ---------------------------------------------------------------
+def test_power_law_brakes_against_reference():
+    power = {"tc_b": 0.1, "tr_b": 0.075, "z_b": 1.5, "tc_h": 0.1, "tr_h": 0.075, "z_h": 1.5}
+    for scene in ("engage", "stop"):
+        ref = R.reference_run(scene, False, T_END, power=power)
+        drive, out, rows, _ = model_run(scene, False, "iterated", ["power_law"], **power)
+        m_slip, m_lock = key_times(scene, out)
+        assert rel(m_slip, ref["events"][0][0]) < TIME_TOL
+        assert rel(m_lock, ref["events"][1][0]) < TIME_TOL
+        for k in ("E_brake_b", "E_brake_h"):
+            assert rel(out[k], ref[k]) < ENERGY_TOL, (scene, k)
+        # the law itself: B t^z with B = M_p/t_c^z, M_p after t_c; retrace on release
+        Mtb, Mth = R.brake_laws(scene, R.DRIVE, power)
+        for t in (0.0, 0.03, 0.07, 0.1, 0.2):
+            assert drive.brake_torque("b", t) == pytest.approx(Mtb(t), rel=1e-14, abs=1e-12)
+            assert drive.brake_torque("h", t) == pytest.approx(Mth(t), rel=1e-14, abs=1e-12)
+        if scene == "engage":
+            assert drive.brake_torque("b", 0.05) == pytest.approx(
+                1000.0 / 0.1 ** 1.5 * 0.05 ** 1.5)
+
+
+def test_command_edge_inside_a_step_is_located():
+    """A command that crosses 0.5 inside a step (e.g. an extrapolated input) is an event at the
+    crossing, not at the step boundary."""
+    drive, motor = make("engage", False)
+    M = motor.torque(drive.p.w_a_start)
+    x = drive.initial_state(np.array([0.0, M, 0, 0, 0]))
+    t_cross = 0.0123456789
+
+    def u_of_t(t):
+        return np.array([0.5 + (t - t_cross) * 10.0, M, 0, 0, 0])
+    x = drive.advance(0.01, x, 0.01, u_of_t, 1e-10, 1e-10)
+    assert drive.d["t_command"] == pytest.approx(t_cross, abs=1e-12)
+    assert drive.d["command"] == 1 and drive.period() == 2
+
+
+def test_command_reversal_during_engagement():
+    """Stop commanded while the ring still slips: brake torques continue from their values at
+    the edge (no jump), the carrier is braked to rest and the drive returns to idle."""
+    drive, motor = make("engage", False)
+    M0 = motor.torque(drive.p.w_a_start)
+    x = drive.initial_state(np.array([0.0, M0, 0, 0, 0]))
+    t, brake_before = 0.0, None
+    for i in range(600):
+        cmd = 1.0 if t < 0.08 - 1e-12 else 0.0
+        u = np.array([cmd, motor.torque(drive.sun_speed(x)), 0, 0, 0])
+        if cmd == 0.0 and brake_before is None:
+            brake_before = (drive.brake_torque("b", t), drive.brake_torque("h", t))
+            x = drive.on_input_change(t, x, u)
+            assert drive.brake_torque("b", t) == brake_before[0]
+            assert drive.brake_torque("h", t) == brake_before[1]
+        x = drive.advance(t, x, H, held(u), 1e-10, 1e-10)
+        t += H
+    assert drive.period() == 1 and x[3] == 0.0
+    assert drive.d["n_lock_b"] == 0 and drive.d["n_lock_h"] == 1
