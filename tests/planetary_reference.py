@@ -148,14 +148,15 @@ class NewtonEulerDrive:
 def reference_run(scene: str, linear: bool, t_end: float, rtol=1e-12, atol=1e-12,
                   power=None) -> dict:
     """Monolithic run from the steady state with the command at t = 0; returns the event list
-    [(t, 'slip'/'lock'/'pass', member, direction)], end speeds and energies. With `power` the
+    [(t, 'slip'/'lock'/'pass', member, direction)], the speeds (w_a, w_b, w_h) at each event,
+    end speeds and energies. With `power` the
     brakes follow the power law and the integration is split at its kinks."""
     ne = NewtonEulerDrive(scene, linear, power=power)
     kinks = sorted({power[k] for k in ("tc_b", "tr_b", "tc_h", "tr_h")}) if power else []
     w_a, w_h = initial_speeds(scene, ne.torque)
     mode = {"b": -1, "h": 0} if scene == "engage" else {"b": 0, "h": 1}
     y = np.array([w_a, w_h, 0.0, 0.0, 0.0, 0.0])
-    t, events_seen = 0.0, []
+    t, events_seen, speeds = 0.0, [], []
     E0 = ne.kinetic(w_a, w_h)
     for _ in range(40):
         funcs, kinds = [], []
@@ -204,9 +205,10 @@ def reference_run(scene: str, linear: bool, t_end: float, rtol=1e-12, atol=1e-12
             else:
                 mode = dict(mode, **{k: -1 if T > 0 else 1})
                 events_seen.append((t, "pass", k, mode[k]))
+        speeds.append((y[0], ne.w_b(y[0], y[1]), y[1]))
     w_a, w_h = y[0], y[1]
     E_kin = ne.kinetic(w_a, w_h)
-    return {"events": events_seen, "w_a": w_a, "w_b": ne.w_b(w_a, w_h), "w_h": w_h,
+    return {"events": events_seen, "speeds_at_events": speeds, "w_a": w_a, "w_b": ne.w_b(w_a, w_h), "w_h": w_h,
             "E_brake_b": y[2], "E_brake_h": y[3], "E_resist": y[4], "W_motor": y[5],
             "dE_kin": E_kin - E0, "mode": mode}
 
@@ -251,14 +253,26 @@ def closed_form(scene: str, t_end: float, d=DRIVE) -> dict:
             F_h = m12 * A[0] - Q_h
         return A, F_b, F_h
 
-    def first_root(f, t0, t1, n=400):
-        ts = np.linspace(t0, t1, n + 1)
-        vals = [f(s) for s in ts]
+    def z_at(A, z, s):
+        return expm(A * s) @ z
+
+    def grid(A, z, span, n=400):
+        """z at n + 1 equally spaced instants over span (one expm, repeated products)."""
+        step = expm(A * (span / n))
+        out = [z]
+        for _ in range(n):
+            out.append(step @ out[-1])
+        return np.linspace(0.0, span, n + 1), out
+
+    def first_root(f_of_z, A, z, t0, t1):
+        """First root after t0 of s -> f(z(s)): bracketed on a grid, polished by brentq on
+        the exact expm."""
+        ts, zs = grid(A, z, t1 - t0)
+        vals = [f_of_z(zz) for zz in zs]
         for a, b, fa, fb in zip(ts[:-1], ts[1:], vals[:-1], vals[1:]):
-            if fa == 0.0:
-                return a
             if fa * fb < 0.0:
-                return brentq(f, a, b, xtol=1e-15, rtol=1e-15, maxiter=200)
+                return t0 + brentq(lambda s: f_of_z(z_at(A, z, s)), a, b, xtol=1e-15,
+                                   rtol=1e-15, maxiter=200)
         return None
 
     torque = motor_law(True)
@@ -271,14 +285,11 @@ def closed_form(scene: str, t_end: float, d=DRIVE) -> dict:
     # phase 1: `held` is locked until its friction torque reaches its capacity
     A1, F_b1, F_h1 = pieces(mode1)
     F1 = F_h1 if held == "h" else F_b1
-    def z_at(A, z, s):
-        return expm(A * s) @ z
 
-    def g1(s):  # capacity minus |holding torque|: the held member breaks free at its root
-        z = z_at(A1, z0, s)
+    def g1(z):  # capacity minus |holding torque|: the held member breaks free at its root
         return float(C[held] @ z - abs(F1 @ z))
 
-    t1 = first_root(g1, 0.0, t_end)
+    t1 = first_root(g1, A1, z0, 0.0, t_end)
     z1 = z_at(A1, z0, t1)
     F_at_t1 = float(F1 @ z1)
     direction = -1 if F_at_t1 > 0 else 1
@@ -286,7 +297,7 @@ def closed_form(scene: str, t_end: float, d=DRIVE) -> dict:
     mode2 = dict(mode1, **{held: direction})
     A2, _, _ = pieces(mode2)
     i_mover = 0 if mover == "b" else 1
-    t2 = first_root(lambda s: float(z_at(A2, z1, s - t1)[i_mover]), t1, t_end)
+    t2 = first_root(lambda z: float(z[i_mover]), A2, z1, t1, t_end)
     z2 = z_at(A2, z1, t2 - t1)
     z2[i_mover] = 0.0
     # phase 3: `mover` locked
@@ -294,8 +305,8 @@ def closed_form(scene: str, t_end: float, d=DRIVE) -> dict:
     A3, F_b3, F_h3 = pieces(mode3)
     z3 = z_at(A3, z2, t_end - t2)
     F3 = F_b3 if mover == "b" else F_h3
-    hold_margin = min(float((C[mover] @ z_at(A3, z2, s)) - abs(F3 @ z_at(A3, z2, s)))
-                      for s in np.linspace(0.0, t_end - t2, 200))
+    hold_margin = min(float(C[mover] @ z - abs(F3 @ z)) for z in grid(A3, z2, t_end - t2)[1])
+
     def w_a(z):
         return -p * z[0] + (1 + p) * z[1]
 

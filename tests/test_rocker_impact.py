@@ -1,9 +1,10 @@
-"""RockerImpact model and the paper's analysis (seed rocker_impact_unit; docs/models/rocker_impact.md).
+"""RockerImpact model and the paper's analysis (seed rocker_impact_unit; model card
+docs/models/rocker_impact.md).
 
 The MO-100 table is computed once (module fixture); the model runs through its own `advance`
 over coarse communication steps, as the FMU adapter calls it. Every tolerance has its reason in
-a comment. Internal tolerances: rtol = atol = 1e-10 for the model (atol relative to the model's
-nominal state scales), rtol = 1e-12 for the independent reference written here.
+a comment. Internal tolerances: rtol = 1e-10 for the model with atol = rtol * state_nominal()
+(as the FMU adapter passes them), rtol = 1e-12 for the independent reference written here.
 """
 from __future__ import annotations
 
@@ -21,7 +22,7 @@ from crankfmu.physics.rocker_analysis import (
     format_impact_table, impact_table, linearise, second_approximation, validity)
 from crankfmu.physics.rocker_impact import RockerImpact
 
-RTOL = ATOL = 1e-10          # model's internal tolerances in these tests
+RTOL = 1e-10                 # model's internal relative tolerance in these tests
 MO100 = RockerData()         # J, m, r, R_c, d, V0, E, rho, nu of the seed; S = 1.1 J/(m r)
 S_P = MO100.S_percussion     # centre of percussion J/(m r)
 COMPLIANT = ["support_compliance"]
@@ -45,7 +46,7 @@ def run(model, t_end, h, tau=0.0, J_drive=0.0, record=False):
     t, n = 0.0, int(round(t_end / h))
     rows = []
     for k in range(n):
-        x = model.advance(t, x, h, held(u), RTOL, ATOL)
+        x = model.advance(t, x, h, held(u), RTOL, RTOL * model.state_nominal())
         t = (k + 1) * h
         if record:
             rows.append(model.output_values(t, x, u))
@@ -189,7 +190,7 @@ def test_mo100_table_three_ways(table, f, k_n):
     assert rel(out["c_contact_used"], row.c) < 1e-12 and rel(out["c_support_used"], row.c0) < 1e-12
     assert out["n_impacts"] == 1 and out["contact"] == 0
     # model vs exact: the same linear ODE, integrated at rtol 1e-10 with located events against a
-    # matrix exponential; 1e-7 leaves a factor ~100 over the measured ~1e-9.
+    # matrix exponential; 1e-7 leaves a factor 30 over the measured 3.4e-9 (Tm; Pm, tau ~3e-11).
     assert rel(out["P_peak"], row.Pm_exact) < 1e-7
     assert rel(out["T_peak"], abs(row.Tm_exact)) < 1e-7
     assert rel(out["impact_duration"], row.tau_exact) < 1e-7
@@ -318,7 +319,7 @@ def test_energy_balance(effects):
 
 @pytest.mark.parametrize("effects,steps", [
     (COMPLIANT, [1e-6, 1e-5, 1e-4, 1e-3, 1e-2]),
-    (HERTZ, [1e-5, 1e-3, 1e-2]),
+    (HERTZ, [1e-6, 1e-4, 1e-3, 1e-2]),
 ])
 def test_communication_step_does_not_change_the_impact(effects, steps):
     """Peaks, duration, impulse and radiated energy of the impact are the same for communication
@@ -326,7 +327,7 @@ def test_communication_step_does_not_change_the_impact(effects, steps):
     tolerance (the runs differ only in where the integrator restarts)."""
     results = []
     for h in steps:
-        out, _, _ = run(make(effects), max(1e-2, h), h)
+        out, _, _ = run(make(effects), max(2e-3, h), h)
         results.append(out)
     ref = results[steps.index(1e-3)]
     for out in results:
@@ -342,17 +343,17 @@ def test_outputs_during_the_impact_and_rollback():
     u = model.default_inputs()
     x = model.initial_state(u)
     assert model.output_values(0.0, x, u)[model.output_index("contact")] == 1.0
-    x = model.advance(0.0, x, 1e-4, held(u), RTOL, ATOL)
+    x = model.advance(0.0, x, 1e-4, held(u), RTOL, RTOL * model.state_nominal())
     saved_x, saved_d = x.copy(), json.loads(json.dumps(model.discrete_state()))
     y1 = model.output_values(1e-4, x, u)
     assert y1[model.output_index("contact")] == 1.0
     P = y1[model.output_index("P")]
     assert y1[model.output_index("P_peak")] == pytest.approx(P, rel=1e-12)   # still rising
     assert y1[model.output_index("impact_duration")] == pytest.approx(1e-4, rel=1e-12)
-    xa = model.advance(1e-4, x, 9e-4, held(u), RTOL, ATOL)
+    xa = model.advance(1e-4, x, 9e-4, held(u), RTOL, RTOL * model.state_nominal())
     ya = model.output_values(1e-3, xa, u)
     model.set_discrete_state(saved_d)
-    xb = model.advance(1e-4, saved_x, 9e-4, held(u), RTOL, ATOL)
+    xb = model.advance(1e-4, saved_x, 9e-4, held(u), RTOL, RTOL * model.state_nominal())
     yb = model.output_values(1e-3, xb, u)
     assert np.array_equal(xa, xb) and np.array_equal(ya, yb)    # deterministic: bit-identical
 
@@ -379,10 +380,9 @@ def test_recontact_after_rebound():
     assert bool(out["contact"]) == touching
     s = dict(zip(model.state_names(), x))
     assert rel(s["theta"], y_ref[1]) < 1e-6 and abs(s["omega"] - y_ref[3]) < 1e-6 * 10
-    last = impacts[-1] if impacts[-1]["t_end"] is not None else impacts[-2]
-    if impacts[-1]["t_end"] is None:     # ongoing at t_end: the model reports that one
-        last = impacts[-1]
-    assert rel(out["P_peak"], last["P_peak"]) < 1e-6
+    # the model reports the last impact, finished or ongoing at t_end
+    assert rel(out["P_peak"], impacts[-1]["P_peak"]) < 1e-6
+    assert rel(out["T_peak"], impacts[-1]["T_peak"]) < 1e-6
     # energy with the work of the drive torque
     p = model.p
     u0, v0, th, om = s["u0"], s["v0"], s["theta"], s["omega"]
@@ -423,9 +423,11 @@ def test_drive_inertia_and_parameter_checks():
         RockerImpact({"strike_at_start": 0.0, "theta_start": 0.01})   # inside the tool
     with pytest.raises(ParameterError, match="strike_at_start"):
         RockerImpact({"strike_at_start": 0.5})
+    with pytest.raises(ParameterError, match="c_support"):   # centre of percussion: Tm = 0
+        RockerImpact({"S": S_P}).initial_state(np.zeros(2))
     assert make(COMPLIANT).state_names() == ("u0", "v0", "theta", "omega", "w_tool", "impulse",
-                                             "E_radiated")
-    assert len(make([]).state_names()) == 5             # pinned: no support states
+                                             "E_radiated", "t_contact")
+    assert len(make([]).state_names()) == 6             # pinned: no support states
 
 
 def test_second_approximation_matches_validity_estimate(table):

@@ -6,6 +6,10 @@ import importlib
 FMU_MODELS: dict[str, str] = {
     "DcServoMotor": "dc_motor:DcServoMotor",
     "StephensonPress": "stephenson_press:StephensonPress",
+    "InductionMotor": "induction_motor:InductionMotor",
+    "PlanetaryClutchDrive": "planetary_drive:PlanetaryClutchDrive",
+    "RockerImpact": "rocker_impact:RockerImpact",
+    "MillStandDrive": "mill_stand:MillStandDrive",
 }
 
 

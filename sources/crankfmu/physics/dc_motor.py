@@ -108,8 +108,8 @@ class DcServoMotor(PhysicsModel):
 
     # -- contract --------------------------------------------------------------------------
     def initial_state(self, u):
-        """Start in electrical equilibrium with the inputs: M = M_s, controller integral at the
-        voltage that holds the present speed error at zero command change (I = u if stalled)."""
+        """Start in electrical equilibrium with the inputs: M = M_s for the voltage applied at
+        the start; the speed loop's integral starts at I = 0."""
         x = []
         if self.on("electrical_lag"):
             U = u[2] if not self.on("speed_loop") else float(np.clip(

@@ -16,7 +16,7 @@ The derivations (and the points where the printed paper is wrong) are in
 docs/models/stephenson_press_analysis.md; each function's docstring names its equation.
 
 Conventions: a harmonic l of a periodic signal x(t) of fundamental nu is written
-    x(t) = sum_l X_l cos(l nu t + alpha_l) = sum_l Re[Xc_l exp(i l nu t)],  Xc_l = X_l e^{i alpha_l},
+    x(t) = sum_l X_l cos(l nu t + alpha_l) = sum_l Re[Xc_l exp(i l nu t)], Xc_l = X_l e^{i alpha_l},
 so amplitude and phase are |Xc_l| and arg Xc_l. With phi0 = omega0 t the same series is a series
 in the crank angle phi0.
 """
@@ -141,7 +141,8 @@ class MeanSpeedQuadratic:
     sum_abs_dJ  sum_k |J'(phi_k)|, the scale against which sum_dJ is zero
     p, d        coefficients of (12) [rad/s], [rad^2/s^2] (inf when sum_dJ is exactly 0)
     roots_printed  the two roots by the printed formula (13) (cancellation: meaningless)
-    root_finite    the finite root computed stably, -2d/(p + sqrt(p^2 - 4d)) -> (n D + sum M_C)/(n s)
+    root_finite    the finite root computed stably, -2d/(p + sqrt(p^2 - 4d)),
+                   which tends to (n D + sum M_C)/(n s)
     """
 
     n: int
@@ -578,8 +579,8 @@ def successive_approximations(drive: ReducedDrive, lag: bool = False, iterations
         c = np.fft.rfft(R) / n
         omega_new = (drive.D + float(c[0].real)) / drive.s
         V = speed_error_response(l * omega_new, J0, drive.s, drive.theta, tau) * 2.0 * c[l]
-        psi_c = V / (1j * l * omega_new) if k > 0 else psi_c
         # psi(theta) has the coefficients of psi(t) = sum Re[Psi_l exp(i l Omega t)]
+        psi_c = V / (1j * l * omega_new)
         spec[l] = psi_c * (n / 2.0)
         psi_new = np.fft.irfft(spec, n)
         spec[l] = V * (n / 2.0)

@@ -385,20 +385,29 @@ def _peaks(data, c, c0, method):
 
 def linearise(data: RockerData, *, pinned: bool = False, method: str = "first",
               rtol: float = ITERATION_RTOL, P_guess: float = P_GUESS,
-              T_guess_ratio: float = T_GUESS_RATIO, max_iter: int = 200) -> Linearisation:
+              T_guess_ratio: float = T_GUESS_RATIO, max_iter: int = 200,
+              c0: float | None = None) -> Linearisation:
     """The paper's procedure: guess Pm, c = 1.25 K^(2/3) Pm^(1/3), Pm by (8), repeat until two
     cycles differ by less than rtol; then guess Tm, c0 = k_n Tm^(1/3), Tm = max |T1| on
     [0, tau] by (12), repeat likewise. method="exact" takes both peaks from the exact coupled
     solution instead (then the two iterations are coupled and run together).
-    pinned=True: c0 = inf and only c is iterated (k2^2 = c S^2/J)."""
+    pinned=True: c0 = inf and only c is iterated (k2^2 = c S^2/J). A given c0 is kept (only c
+    is iterated). At the centre of percussion (m r S = J) T vanishes and c0 = k_n Tm^(1/3) has
+    no positive fixed point: the support iteration then raises AnalysisError (give c0)."""
     if method not in ("first", "exact"):
         raise ValueError(f"method must be 'first' or 'exact', not {method!r}")
     K = data.K
     Pm, hist_P = P_guess, [P_guess]
     Tm, hist_T = T_guess_ratio * P_guess, [T_guess_ratio * P_guess]
-    if pinned or method == "first":
+    if c0 is not None and not pinned and c0 <= 0.0:
+        raise ValueError(f"c0 must be > 0, not {c0!r}")
+    fixed_c0 = c0
+    if pinned or method == "first" or fixed_c0 is not None:
         # contact iteration; in the first approximation Pm does not depend on c0
-        c0 = math.inf if pinned else support_stiffness(data.k_n, Tm)
+        if pinned:
+            c0 = math.inf
+        elif fixed_c0 is None:
+            c0 = support_stiffness(data.k_n, Tm)
         for _ in range(max_iter):
             new_P = _peaks(data, linearised_contact_stiffness(K, Pm), c0, method)[0]
             hist_P.append(new_P)
@@ -410,9 +419,12 @@ def linearise(data: RockerData, *, pinned: bool = False, method: str = "first",
             raise AnalysisError(f"contact stiffness iteration did not converge in {max_iter} "
                                 f"cycles (Pm history {hist_P[-4:]})")
         c = linearised_contact_stiffness(K, Pm)
-        if pinned:
-            return Linearisation(c, math.inf, Pm, _peaks(data, c, math.inf, method)[1],
+        if pinned or fixed_c0 is not None:
+            return Linearisation(c, c0, Pm, _peaks(data, c, c0, method)[1],
                                  tuple(hist_P), (), method)
+        if data.m * data.r * data.S == data.J or data.eps < 1e-24:
+            raise AnalysisError("centre of percussion (m r S = J): T = 0, so c0 = k_n Tm^(1/3) "
+                                "has no positive fixed point; give c0 (c_support)")
         for _ in range(max_iter):
             new_T = _peaks(data, c, support_stiffness(data.k_n, Tm), method)[1]
             hist_T.append(new_T)

@@ -38,7 +38,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from .base import Effect, IntegrationError, ParameterError, PhysicsModel, Variable
-from .rocker_analysis import RockerData, linearise
+from .rocker_analysis import AnalysisError, RockerData, linearise
 
 _MO100_S = 1.1 * 0.734 / (35.1 * 0.106)   # 10 % beyond the centre of percussion J/(m r)
 
@@ -166,17 +166,17 @@ class RockerImpact(PhysicsModel):
         return self.data().K
 
     def _fresh_discrete(self, c, c0, contact):
-        return {"contact": bool(contact), "n_impacts": 1 if contact else 0, "t_start": None,
-                "P_peak": 0.0, "T_peak": 0.0, "duration": 0.0, "c": c, "c0": c0}
+        return {"contact": bool(contact), "n_impacts": 1 if contact else 0, "P_peak": 0.0,
+                "T_peak": 0.0, "c": c, "c0": c0}
 
     def _split(self, x):
-        """(u0, v0, theta, omega, w, impulse, E_rad) whatever the effects."""
+        """(u0, v0, theta, omega, w, impulse, E_rad, t_contact) whatever the effects."""
         if self.compliant:
-            return tuple(x[:7])
-        return (0.0, 0.0) + tuple(x[:5])
+            return tuple(x[:8])
+        return (0.0, 0.0) + tuple(x[:6])
 
     def delta(self, x) -> float:
-        u0, _, th, _, w, _, _ = self._split(x)
+        u0, _, th, _, w, _, _, _ = self._split(x)
         return u0 + self.p.S * th - w - self.gap
 
     def contact_force(self, delta: float) -> float:
@@ -192,7 +192,7 @@ class RockerImpact(PhysicsModel):
     def _accelerations(self, x, u, P):
         """(u0'', theta'', T)."""
         p = self.p
-        u0, _, _, _, _, _, _ = self._split(x)
+        u0 = self._split(x)[0]
         J_t = p.J + u[1]
         if self.compliant:
             T = self._d["c0"] * u0
@@ -208,7 +208,7 @@ class RockerImpact(PhysicsModel):
     def mechanical_energy(self, x, u) -> float:
         """Kinetic energy of rocker (+ drive inertia) + support and contact potential energy."""
         p = self.p
-        u0, v, _, om, _, _, _ = self._split(x)
+        u0, v, _, om, _, _, _, _ = self._split(x)
         J_t = p.J + u[1]
         E = 0.5 * p.m * v * v + p.m * p.r * v * om + 0.5 * J_t * om * om
         if self.compliant:
@@ -225,17 +225,17 @@ class RockerImpact(PhysicsModel):
             K = self._K_cache = self.K
         return K
 
-    @property
-    def _nominal(self) -> np.ndarray:
-        """Scales for atol: lengths V0 * 0.1 ms, speeds V0, impulse/energy of a 10 kg mass."""
+    def state_nominal(self) -> np.ndarray:
+        """Typical magnitudes (atol = rtol * nominal): lengths V0 * 0.1 ms, speeds V0, impulse
+        and energy of a 10 kg mass at V0, time 1 ms."""
         V = max(self.p.V0, 1.0)
         L, S = V * 1e-4, self.p.S
-        scale = [L, V, L / S, V / S, L, 10.0 * V, 5.0 * V * V]
+        scale = [L, V, L / S, V / S, L, 10.0 * V, 5.0 * V * V, 1e-3]
         return np.array(scale if self.compliant else scale[2:])
 
     # -- contract --------------------------------------------------------------------------
     def state_names(self):
-        rocker = ("theta", "omega", "w_tool", "impulse", "E_radiated")
+        rocker = ("theta", "omega", "w_tool", "impulse", "E_radiated", "t_contact")
         return (("u0", "v0") + rocker) if self.compliant else rocker
 
     def stiffnesses(self, flange_J: float = 0.0) -> tuple[float, float | None]:
@@ -244,7 +244,12 @@ class RockerImpact(PhysicsModel):
         c = 0.0 if self.hertz else p.c_contact
         c0 = p.c_support if self.compliant else None
         if (c == 0.0 and not self.hertz) or c0 == 0.0:
-            lin = linearise(self.data(flange_J), pinned=not self.compliant, rtol=p.iteration_tol)
+            try:
+                lin = linearise(self.data(flange_J), pinned=not self.compliant,
+                                rtol=p.iteration_tol, c0=c0 or None)
+            except AnalysisError as err:
+                raise ParameterError(self.model_name, "c_support", p.c_support,
+                                     f"> 0 N/m here: {err}") from err
             c = lin.c if (c == 0.0 and not self.hertz) else c
             c0 = lin.c0 if c0 == 0.0 else c0
         return float(c), (None if c0 is None else float(c0))
@@ -257,7 +262,7 @@ class RockerImpact(PhysicsModel):
             theta, omega = 0.0, p.V0 / p.S
         else:
             theta, omega = p.theta_start, p.w_start
-        x = np.array(([0.0, 0.0] if self.compliant else []) + [theta, omega, 0.0, 0.0, 0.0])
+        x = np.array(([0.0, 0.0] if self.compliant else []) + [theta, omega, 0.0, 0.0, 0.0, 0.0])
         d0 = p.S * theta - self.gap
         touching = d0 > 0.0 or (d0 == 0.0 and omega > 0.0)
         self._d = self._fresh_discrete(c, c0, touching)
@@ -266,9 +271,9 @@ class RockerImpact(PhysicsModel):
     def derivatives(self, t, x, u):
         P = self._force(x)
         ddu, ddth, _ = self._accelerations(x, u, P)
-        _, v, _, om, _, _, _ = self._split(x)
+        _, v, _, om, _, _, _, _ = self._split(x)
         Z = self._Z
-        rocker = [om, ddth, P / Z, P, P * P / Z]
+        rocker = [om, ddth, P / Z, P, P * P / Z, 1.0 if self._d["contact"] else 0.0]
         return np.array(([v, ddu] if self.compliant else []) + rocker)
 
     @property
@@ -282,12 +287,10 @@ class RockerImpact(PhysicsModel):
         d = self._d
         P = max(self._force(x), 0.0)
         T = self._accelerations(x, u, P)[2]
-        _, _, th, om, _, imp, E_rad = self._split(x)
+        _, _, th, om, _, imp, E_rad, duration = self._split(x)
+        P_peak, T_peak = d["P_peak"], d["T_peak"]
         if d["contact"]:
-            duration = 0.0 if d["t_start"] is None else t - d["t_start"]
-            P_peak, T_peak = max(d["P_peak"], P), max(d["T_peak"], abs(T))
-        else:
-            duration, P_peak, T_peak = d["duration"], d["P_peak"], d["T_peak"]
+            P_peak, T_peak = max(P_peak, P), max(T_peak, abs(T))
         return np.array([om, th, P, T, 1.0 if d["contact"] else 0.0, imp, E_rad, P_peak,
                          T_peak, duration, float(d["n_impacts"]), d["c"] or 0.0,
                          d["c0"] or 0.0], dtype=float)
@@ -308,7 +311,7 @@ class RockerImpact(PhysicsModel):
             return []
 
         def p_peak(t, x):
-            _, v, _, om, _, _, _ = self._split(x)
+            _, v, _, om, _, _, _, _ = self._split(x)
             return v + self.p.S * om - self._force(x) / self._Z
         p_peak.terminal, p_peak.direction = False, -1.0
         if not self.compliant:
@@ -335,11 +338,10 @@ class RockerImpact(PhysicsModel):
         if d["contact"]:          # end of contact: P returned to zero
             self.observe(t, x, u)
             d["contact"] = False
-            d["duration"] = t - (d["t_start"] if d["t_start"] is not None else t)
         else:                     # contact begins: a new impact, fresh statistics
-            d.update(contact=True, n_impacts=d["n_impacts"] + 1, t_start=t, P_peak=0.0,
-                     T_peak=0.0, duration=0.0)
-            x[self.state_names().index("impulse")] = 0.0
+            d.update(contact=True, n_impacts=d["n_impacts"] + 1, P_peak=0.0, T_peak=0.0)
+            names = self.state_names()
+            x[names.index("impulse")] = x[names.index("t_contact")] = 0.0
             self.observe(t, x, u)
         return x
 
@@ -351,18 +353,15 @@ class RockerImpact(PhysicsModel):
 
     def advance(self, t0, x0, h, u_of_t, rtol, atol):
         """Integrate from t0 to t0 + h with the mode switches as terminal events and the force
-        extrema as non-terminal events (atol is relative to the nominal state scales)."""
+        extrema as non-terminal events that do not restart the integrator."""
         if h <= 0.0:
             return np.asarray(x0, dtype=float)
         t, x, t_end = t0, np.array(x0, dtype=float), t0 + h
-        if self._d["contact"] and self._d["t_start"] is None:
-            self._d["t_start"] = t0
-        atol_v = atol * self._nominal
         for _ in range(self.max_events_per_step):
             switch = self.event_functions(u_of_t)
             monitors = self.monitor_functions(u_of_t)
             sol = solve_ivp(lambda s, y: self.derivatives(s, y, u_of_t(s)), (t, t_end), x,
-                            method=self.integrator, rtol=rtol, atol=atol_v,
+                            method=self.integrator, rtol=rtol, atol=atol,
                             events=switch + monitors)
             if sol.status < 0:
                 raise IntegrationError(f"{self.model_name}: {sol.message} at t = {t:.9g} s")

@@ -14,8 +14,8 @@ the two parallel rods 3, 4 (length l) join it to the slider 5 on the vertical th
 Reduced inertia and its derivative (eq. 2, 22; ' is d/dphi):
     J(phi)    = J_c + m5 S'^2 [+ rods],   J_c = i^2 J_input + J1 + m2 r^2
     J'(phi)/2 = m5 S' S''     [+ rods]
-Rods (effect rod_inertia): two uniform bars, centre C = A/2 + (0, (l/2) sin psi) relative to the
-slider line, each adding m_rod |C'|^2 + (m_rod l^2/12) psi'^2 to J and m_rod C'.C'' +
+Rods (effect rod_inertia): two uniform bars with centre C = (r cos(phi)/2, r sin(phi) + (l/2) sin psi),
+each adding m_rod |C'|^2 + (m_rod l^2/12) psi'^2 to J and m_rod C'.C'' +
 (m_rod l^2/12) psi' psi'' to J'/2.
 
 Motion (eq. 1):  J(phi) phi'' + J'(phi)/2 phi'^2 = i M_D + M_C(phi)

@@ -179,7 +179,9 @@ def _parse_input(path, target: str, raw) -> InputSignal:
     key = f"[inputs].\"{target}\""
     if isinstance(raw, (int, float)) and not isinstance(raw, bool):
         return InputSignal(target, [0.0], [_number(path, key, raw)])
-    raw = _table(path, key, raw)
+    if not isinstance(raw, dict):
+        raise SceneError(path, key, "must be a finite number or {table = [[t, v], ...]}, "
+                                    f"got {raw!r}")
     _only_keys(path, key, raw, {"table", "interpolation"})
     rows = raw.get("table")
     if not isinstance(rows, list) or not rows or \

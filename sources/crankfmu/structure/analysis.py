@@ -324,36 +324,89 @@ def _describe_link_motion(mech, model, link, twist, tol):
 
 
 def _describe_locals(mech, model, Z, tol):
+    """Names for a basis of the local mobilities Z (f x l, joint velocities).
+
+    Motions that move a single link come first (an RSSR rod spinning); the rest are named by
+    the motion of one describing link (an output link if it moves), choosing axis-aligned
+    rotations about its reference point and translations where the space allows.
+    """
     if Z.shape[1] == 0:
         return []
     links = list(mech.links)
-    link_maps = {ln: model.link_T[ln] @ Z for ln in links}
     names, found = [], []
     for ln in links:
-        others = [link_maps[o] for o in links if o != ln]
+        others = [model.link_T[o] @ Z for o in links if o != ln]
         beta = _null(np.vstack(others), tol) if others else np.eye(Z.shape[1])
-        for b in beta.T:
-            tw = link_maps[ln] @ b
-            if np.linalg.norm(tw) <= tol:
-                continue
-            vec = Z @ b
-            if found and np.linalg.matrix_rank(np.column_stack(found + [vec]), tol=1e-6) \
-                    <= len(found):
-                continue
+        if beta.shape[1] == 0:
+            continue
+        Zs = _complement(Z @ beta, found, tol)
+        for vec in _elementary(mech, model, ln, Zs, tol):
             found.append(vec)
-            names.append(_describe_link_motion(mech, model, ln, tw / np.max(np.abs(tw)), tol))
-    # the rest (motions that move several links at once)
+            names.append(_describe_link_motion(mech, model, ln, model.link_T[ln] @ vec, tol))
     rest = _complement(Z, found, tol)
-    for vec in rest.T:
-        parts = []
+    while rest.shape[1]:
+        ranks = []
         for ln in links:
-            tw = model.link_T[ln] @ vec
-            if np.linalg.norm(tw) > 1e-6 * max(1.0, np.linalg.norm(vec)):
-                parts.append(_describe_link_motion(mech, model, ln, tw / np.linalg.norm(tw), tol))
-        joints = sorted({mech.joints[model.cols[i][0]].name for i in np.flatnonzero(
-            np.abs(vec) > 1e-6 * np.max(np.abs(vec)))})
-        names.append("joints " + ", ".join(joints) + " move together: " + "; ".join(parts))
+            rk = np.linalg.matrix_rank(_ref_twist(mech, model, ln) @ rest, tol=1e-7)
+            ranks.append((rk, any(o.link == ln for o in mech.outputs), ln))
+        _, _, ln = max(ranks)
+        vecs = _elementary(mech, model, ln, rest, tol)
+        if not vecs:  # cannot happen for a non-trivial motion; guard against an endless loop
+            vecs = list(rest.T)
+        for vec in vecs:
+            found.append(vec)
+            movers = [o for o in links if o != ln and np.linalg.norm(model.link_T[o] @ vec)
+                      > 1e-7 * max(1.0, np.linalg.norm(model.link_T[ln] @ vec))]
+            text = _describe_link_motion(mech, model, ln, model.link_T[ln] @ vec, tol)
+            if movers:
+                text += " (" + ", ".join(movers) + " follow)"
+            names.append(text)
+        rest = _complement(Z, found, tol)
     return names
+
+
+def _ref_twist(mech, model, link):
+    """6 x f map from joint velocities to the link's twist at its reference point."""
+    T = model.link_T[link]
+    pref = (mech.reference_point(link) - model.centre) / model.scale
+    skew = np.array([[0, -pref[2], pref[1]], [pref[2], 0, -pref[0]], [-pref[1], pref[0], 0]])
+    # v_ref = v0 + omega x pref = v0 - pref x omega
+    return np.vstack([T[:3], T[3:] - skew @ T[:3]])
+
+
+def _elementary(mech, model, link, Zs, tol):
+    """Basis of span(Zs) whose motions of `link` are elementary where possible.
+
+    Elementary: rotation about x, y or z through the link's reference point, or translation
+    along x, y or z. Motions of span(Zs) that do not move `link` are left out.
+    """
+    if Zs.shape[1] == 0:
+        return []
+    A = _ref_twist(mech, model, link) @ Zs
+    r, u, s, vt = _svd_rank(A, 1e-7)
+    if r == 0:
+        return []
+    rng = u[:, :r]
+    chosen = []
+    for i in range(6):
+        e = np.zeros(6)
+        e[i] = 1.0
+        if np.linalg.norm(e - rng @ (rng.T @ e)) < 1e-6 and \
+                np.linalg.matrix_rank(np.column_stack(chosen + [e]), tol=1e-6) > len(chosen):
+            chosen.append(e)
+    for col in rng.T:
+        if len(chosen) == r:
+            break
+        M = np.column_stack(chosen) if chosen else np.zeros((6, 0))
+        v = col - M @ np.linalg.lstsq(M, col, rcond=None)[0] if chosen else col
+        if np.linalg.norm(v) > 1e-6:
+            chosen.append(v / np.linalg.norm(v))
+    out = []
+    for e in chosen:
+        c, *_ = np.linalg.lstsq(A, e, rcond=None)
+        vec = Zs @ c
+        out.append(vec / np.linalg.norm(vec))
+    return out
 
 
 def _complement(Z, found, tol):
@@ -386,28 +439,39 @@ def _describe_wrench_space(mech, model, Y, loop_index, tol):
         if abs(h) > 1e-6:
             text = (f"screw along {_dir_name(e)} (line through {_pt(pt)}, pitch "
                     f"{h * model.scale:.4g} m)")
-        text += _rod_note(mech, model, loop_index, e)
+        else:
+            text += _rod_note(mech, model, loop_index, e)
         names.append(text)
     return names
 
 
 def _rod_note(mech, model, loop_index, e):
+    """Which link dimensions a redundant force along e ties together (the dimension chain)."""
     if loop_index is None:
         return ""
-    loop_joint_names = {mech.joints[j].name for j in model.loops[loop_index]}
-    rods = []
-    for ln in mech.links:
-        js = [j for j in mech.joints if ln in j.between]
-        if len(js) != 2 or not all(j.name in loop_joint_names for j in js):
+    loop = model.loops[loop_index]
+    parts, all_parallel = [], True
+    for i, ja in enumerate(loop):
+        jb = loop[(i + 1) % len(loop)]
+        A, B = mech.joints[ja], mech.joints[jb]
+        shared = set(A.between) & set(B.between)
+        if not shared:
             continue
-        d = np.array(js[1].point) - np.array(js[0].point)
-        if np.linalg.norm(d) > 1e-12 and np.linalg.norm(np.cross(d / np.linalg.norm(d), e)) < 1e-6:
-            rods.append(f"{ln} ({js[0].name}–{js[1].name})")
-    if len(rods) >= 2:
-        return ": the lengths of " + " and ".join(rods) + " must agree"
-    if len(rods) == 1:
-        return f": along {rods[0]}"
-    return ""
+        link = sorted(shared)[0]
+        seg = np.array(B.point) - np.array(A.point)
+        along = float(seg @ e)
+        if abs(along) <= 1e-9 * model.scale:
+            continue
+        if np.linalg.norm(np.cross(seg, e)) > 1e-6 * np.linalg.norm(seg):
+            all_parallel = False
+        parts.append(f"{link} ({A.name}–{B.name})")
+    if not parts:
+        return ""
+    if all_parallel and len(parts) == 2:
+        return ": the lengths of " + " and ".join(parts) + " must agree"
+    if all_parallel and len(parts) > 2:
+        return ": the collinear lengths of " + ", ".join(parts) + " must close"
+    return ": dimension chain along it: " + ", ".join(parts)
 
 
 def _describe_redundant(mech, model, B, tol):
@@ -531,7 +595,7 @@ def _notes(mech, main, dof_total, q, q_mal, s, rank, tol):
         notes.append("outputs not declared: the main mobility counts the whole poses of the "
                      "links jointed to the frame (" + ", ".join(str(o) for o in mech.outputs)
                      + ")")
-    if s.size and rank and rank < s.size:
+    if rank:
         smallest_kept = float(s[rank - 1])
         if smallest_kept < 1e3 * tol * max(1.0, float(s[0])):
             notes.append(f"near a singular configuration: smallest kept singular value "

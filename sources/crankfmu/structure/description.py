@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -122,7 +122,6 @@ class Mechanism:
     description: str = ""
     rank_tolerance: float = DEFAULT_RANK_TOLERANCE
     outputs_declared: bool = False
-    extra: dict = field(default_factory=dict)
 
     @property
     def n(self) -> int:
@@ -173,11 +172,11 @@ def _unknown_keys(source, where, table, allowed):
 def _vector(source, key, value, *, unit: bool) -> tuple[float, float, float]:
     if (not isinstance(value, list) or len(value) != 3
             or not all(isinstance(c, (int, float)) and not isinstance(c, bool) for c in value)):
-        raise MechanismError(source, key, f"= {value!r} is not a 3-vector",
+        raise MechanismError(source, key, f"{value!r} is not a 3-vector",
                              "a list of three numbers [x, y, z]")
     v = np.array(value, dtype=float)
     if not np.all(np.isfinite(v)):
-        raise MechanismError(source, key, f"= {value!r} has a non-finite component",
+        raise MechanismError(source, key, f"{value!r} has a non-finite component",
                              "finite numbers")
     if unit:
         norm = float(np.linalg.norm(v))
@@ -189,7 +188,7 @@ def _vector(source, key, value, *, unit: bool) -> tuple[float, float, float]:
 
 def _name(source, key, value):
     if not isinstance(value, str) or not value.strip():
-        raise MechanismError(source, key, f"= {value!r} is not a name", "a non-empty string")
+        raise MechanismError(source, key, f"{value!r} is not a name", "a non-empty string")
     return value.strip()
 
 
@@ -231,7 +230,7 @@ def _freedoms_of_type(source, key, kind, axis, axis2):
 
 def _free_list(source, key, value):
     if not isinstance(value, list) or not value:
-        raise MechanismError(source, key, f"= {value!r} is not a list of freed axes",
+        raise MechanismError(source, key, f"{value!r} is not a list of freed axes",
                              'a non-empty list of "rx", "ry", "rz", "tx", "ty", "tz" or '
                              "{r = [x, y, z]} / {t = [x, y, z]}")
     out = []
@@ -239,20 +238,20 @@ def _free_list(source, key, value):
         k = f"{key}[{i}]"
         if isinstance(item, str):
             if item not in AXIS_NAMES:
-                raise MechanismError(source, k, f"= {item!r} is not a freed axis",
+                raise MechanismError(source, k, f"{item!r} is not a freed axis",
                                      ", ".join(f'"{a}"' for a in AXIS_NAMES)
                                      + " or {r = [x, y, z]} / {t = [x, y, z]}")
             out.append(Freedom(item[0], UNIT[item[1]], item))
         elif isinstance(item, dict):
             if len(item) != 1 or next(iter(item)) not in ("r", "t"):
-                raise MechanismError(source, k, f"= {item!r} is not a freed axis",
+                raise MechanismError(source, k, f"{item!r} is not a freed axis",
                                      "an inline table with exactly one key r or t: "
                                      "{r = [x, y, z]} or {t = [x, y, z]}")
             kind, vec = next(iter(item.items()))
             d = _vector(source, f"{k}.{kind}", vec, unit=True)
             out.append(Freedom(kind, d, f"{kind}({d[0]:.3g}, {d[1]:.3g}, {d[2]:.3g})"))
         else:
-            raise MechanismError(source, k, f"= {item!r} is not a freed axis",
+            raise MechanismError(source, k, f"{item!r} is not a freed axis",
                                  '"rx" ... "tz" or {r = [x, y, z]} / {t = [x, y, z]}')
     return tuple(out)
 
@@ -270,7 +269,7 @@ def mechanism_from_dict(data: dict, source: str = "<memory>") -> Mechanism:
     name = _name(source, "mechanism.name", mech["name"])
     links_raw = mech.get("links")
     if not isinstance(links_raw, list) or not links_raw:
-        raise MechanismError(source, "mechanism.links", f"= {links_raw!r} is not a list of links",
+        raise MechanismError(source, "mechanism.links", f"{links_raw!r} is not a list of links",
                              'a non-empty list of moving link names ("frame" is implicit)')
     links = []
     for i, ln in enumerate(links_raw):
@@ -288,7 +287,7 @@ def mechanism_from_dict(data: dict, source: str = "<memory>") -> Mechanism:
     tol = mech.get("rank_tolerance", DEFAULT_RANK_TOLERANCE)
     if (not isinstance(tol, (int, float)) or isinstance(tol, bool) or not math.isfinite(tol)
             or not 0.0 < tol < 1e-2):
-        raise MechanismError(source, "mechanism.rank_tolerance", f"= {tol!r}",
+        raise MechanismError(source, "mechanism.rank_tolerance", f"{tol!r} is out of range",
                              "a number between 0 and 1e-2 (relative singular-value cut-off)")
 
     joints_raw = data.get("joints")
@@ -313,7 +312,7 @@ def mechanism_from_dict(data: dict, source: str = "<memory>") -> Mechanism:
         between = jt.get("between")
         if (not isinstance(between, list) or len(between) != 2
                 or not all(isinstance(b, str) for b in between)):
-            raise MechanismError(source, f"{key}.between", f"= {between!r}",
+            raise MechanismError(source, f"{key}.between", f"{between!r} is not a pair of links",
                                  "two link names [link, link]")
         for b in between:
             if b not in known:
@@ -339,7 +338,7 @@ def mechanism_from_dict(data: dict, source: str = "<memory>") -> Mechanism:
         if has_type:
             kind = jt["type"]
             if kind not in JOINT_TYPES:
-                raise MechanismError(source, f"{key}.type", f"= {kind!r} is not a joint type",
+                raise MechanismError(source, f"{key}.type", f"{kind!r} is not a joint type",
                                      ", ".join(JOINT_TYPES) + ' (or free = ["rx", "tx", ...])')
             if axis2 is not None and kind != "U":
                 raise MechanismError(source, f"{key}.axis2", f"is only used by U joints",
@@ -407,13 +406,14 @@ def _outputs(source, raw, links, joints):
                     ground.append(b)
         return tuple(Output(b, None) for b in ground), False
     if not isinstance(raw, list) or not raw:
-        raise MechanismError(source, "mechanism.outputs", f"= {raw!r}",
+        raise MechanismError(source, "mechanism.outputs", f"{raw!r} is not a list of outputs",
                              'a non-empty list of "link" or "link.rx" ... "link.tz"')
     out = []
     for i, item in enumerate(raw):
         k = f"mechanism.outputs[{i}]"
         if not isinstance(item, str):
-            raise MechanismError(source, k, f"= {item!r}", '"link" or "link.rx" ... "link.tz"')
+            raise MechanismError(source, k, f"{item!r} is not an output",
+                                 '"link" or "link.rx" ... "link.tz"')
         link, _, coord = item.partition(".")
         if link not in links:
             raise MechanismError(source, k, f"link {link!r} is not a moving link",

@@ -66,7 +66,7 @@ def verdict(r: StructureResult) -> list[str]:
         if local:
             out.append(f"q = {q} holds with W = {dof} ({main} main + {local} local): "
                        f"with W = dof_total the formulas give q = {r.q_formulas_total}.")
-        if q > r.q_malyshev and local:
+        if r.q_malyshev >= 0 and local:
             out.append(f"the geometry is special: {local} local mobility(ies) and as many extra "
                        f"redundant constraints that a counting formula with W = {main} cannot "
                        f"see.")

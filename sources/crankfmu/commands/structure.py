@@ -1,0 +1,18 @@
+"""`crankfmu structure MECH.toml [--json]`: mobility and redundant constraints of a mechanism."""
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def register(sub) -> None:
+    p = sub.add_parser("structure", help="mobility and redundant constraints of a mechanism "
+                                         "description (scenarios/mechanisms/*.toml)")
+    p.add_argument("mechanism", type=Path)
+    p.add_argument("--json", action="store_true", help="machine-readable result")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from ..structure.report import main
+
+    return main([str(args.mechanism)] + (["--json"] if args.json else []))
