@@ -63,7 +63,10 @@ def test_a_diverging_run_names_time_component_and_variable_and_keeps_its_rows(
     with pytest.raises(RunError) as err:
         run_scene(servo_scene, RunOptions(out=out, fmu_dir=fmu_dir, progress=False))
     message = str(err.value)
-    assert "diverged at t = " in message and ("press." in message or "motor." in message)
+    # Either the master sees a connected output leave the bounded range, or an FMU gives up a
+    # step whose work limit the runaway exceeded: both name the time and the component.
+    assert ("diverged at t = " in message and ("press." in message or "motor." in message)) or \
+        ("near t = " in message and "StephensonPress: more than" in message), message
     from fmpy.util import read_csv
     rows = read_csv(out)
     assert len(rows) >= 2 and np.all(np.isfinite(rows["press.w_crank"]))

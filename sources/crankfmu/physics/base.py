@@ -93,6 +93,10 @@ class PhysicsModel:
     outputs: tuple[Variable, ...] = ()
     integrator: str = "DOP853"  # scipy solve_ivp method suited to the model's stiffness
     max_events_per_step: int = 1000
+    # Work limit per communication step (as CVODE's mxstep): a diverging coupling can drive a
+    # state so far that integrating one step would take hours; failing fast lets the master
+    # report where and when it happened.
+    max_derivative_calls_per_step: int = 200_000
 
     def __init__(self, parameters: dict | None = None, effects: Sequence[str] | dict | None = None):
         values = {v.name: float(v.start) for v in self.parameters}
@@ -185,11 +189,23 @@ class PhysicsModel:
         """Integrate the states from t0 to t0 + h, locating events on the way."""
         if x0.size == 0 or h <= 0.0:
             return x0
+        if not np.all(np.isfinite(u_of_t(t0))):
+            raise IntegrationError(f"{self.model_name}: input not finite at t = {t0:.9g} s")
         t, x, t_end = t0, np.asarray(x0, dtype=float), t0 + h
+        calls = [0]
+
+        def rhs(s, y):
+            calls[0] += 1
+            if calls[0] > self.max_derivative_calls_per_step:
+                raise IntegrationError(
+                    f"{self.model_name}: more than {self.max_derivative_calls_per_step} "
+                    f"derivative evaluations in the step from t = {t0:.9g} s (states "
+                    f"{dict(zip(self.state_names(), np.round(y, 6)))}): diverging or too stiff")
+            return self.derivatives(s, y, u_of_t(s))
         for _ in range(self.max_events_per_step):
             events = self.event_functions(u_of_t) or None
             options = {"jac": self._jac_for(u_of_t)} if self._has_jacobian() else {}
-            sol = solve_ivp(lambda s, y: self.derivatives(s, y, u_of_t(s)), (t, t_end), x,
+            sol = solve_ivp(rhs, (t, t_end), x,
                             method=self.integrator, rtol=rtol, atol=atol, events=events,
                             **options)
             if sol.status < 0:
