@@ -31,15 +31,13 @@ def resolve_fmu(scene: Scene, comp_name: str, fmu_dir: Path) -> Path:
         if not path.is_file():
             raise SceneError(scene.path, key, f"no FMU file at {path}")
         return path
-    from ..fmi.build import build_fmu, runtime_files
-    from ..fmi.model_description import sources_digest
+    from ..fmi.build import build_fmu, current_build_id
     from ..physics.catalog import FMU_MODELS
     if ref not in FMU_MODELS:
         raise SceneError(scene.path, key, f"unknown FMU {ref!r}; known: {', '.join(FMU_MODELS)}"
                                           " or a path ending in .fmu")
     path = fmu_dir / f"{ref}.fmu"
-    digest = sources_digest(runtime_files())
-    if not path.is_file() or _build_id(path) != digest:
+    if not path.is_file() or _build_id(path) != current_build_id():
         print(f"building {path} (sources changed or FMU missing)")
         build_fmu(ref, fmu_dir)
     return path
@@ -133,6 +131,9 @@ class System:
         self.external = {c: [(s.target.split(".", 1)[1], s) for s in scene.inputs.values()
                              if s.target.split(".", 1)[0] == c] for c in fmus}
         self.write_external = {c: fmus[c].writer([n for n, _ in self.external[c]]) for c in fmus}
+        # constants are written once at initialization; only time tables change during a run
+        self.external_varies = {c: any(len(s.times) > 1 for _, s in self.external[c])
+                                for c in fmus}
 
     def refresh_outputs(self, comp: str) -> np.ndarray:
         self.outputs[comp] = self.read_outputs[comp]().copy()
@@ -142,6 +143,6 @@ class System:
         outputs = self.outputs if outputs is None else outputs
         return [outputs[src][k] for src, k in self.in_sources[comp]]
 
-    def set_external(self, comp: str, t: float) -> None:
-        if self.external[comp]:
+    def set_external(self, comp: str, t: float, initial: bool = False) -> None:
+        if self.external[comp] and (initial or self.external_varies[comp]):
             self.write_external[comp]([s.value_at(t) for _, s in self.external[comp]])

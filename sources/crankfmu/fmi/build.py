@@ -8,6 +8,7 @@ FMUs of different builds load different packages, so no FMU ever runs another bu
 from __future__ import annotations
 
 import argparse
+import functools
 import html
 import inspect
 import shutil
@@ -42,6 +43,12 @@ def runtime_files() -> list[tuple[str, bytes]]:
         for path in sorted((PACKAGE_DIR / sub).glob("*.py")):
             files.append((f"{sub}/{path.name}", path.read_bytes()))
     return files
+
+
+@functools.lru_cache(maxsize=1)
+def current_build_id() -> str:
+    """Hash of the bundled runtime sources: the FMU's version and GUID seed (computed once)."""
+    return sources_digest(runtime_files())
 
 
 def _write_runtime(dest: Path, digest: str) -> Path:
@@ -116,7 +123,7 @@ def _repack(built: Path, target: Path, model_name: str, slave_class, digest: str
 def build_fmu(model_name: str, dest: Path) -> Path:
     from pythonfmu.builder import FmuBuilder
 
-    digest = sources_digest(runtime_files())
+    digest = current_build_id()
     dest.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="crankfmu_build_") as tmp:
         tmp = Path(tmp)

@@ -14,10 +14,13 @@ in `crankfmu.cosim.wiring` before anything runs.
 """
 from __future__ import annotations
 
+import bisect
 import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+
+import numpy as np
 
 ALGORITHMS = ("gauss-seidel", "jacobi", "iterative", "adaptive")
 TOP_LEVEL_KEYS = {"scene", "master", "components", "connections", "inputs", "record", "swap",
@@ -67,9 +70,7 @@ class InputSignal:
         if len(self.times) == 1:
             return self.values[0]
         if self.interpolation == "step":
-            k = max(0, sum(1 for tk in self.times if tk <= t) - 1)
-            return self.values[k]
-        import numpy as np
+            return self.values[max(0, bisect.bisect_right(self.times, t) - 1)]
         return float(np.interp(t, self.times, self.values))
 
 

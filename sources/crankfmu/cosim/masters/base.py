@@ -48,7 +48,7 @@ class Master:
         component covers any loop-free chain of direct feedthrough)."""
         system = self.system
         for comp in system.order:
-            system.set_external(comp, t0)
+            system.set_external(comp, t0, initial=True)
         for _ in range(len(system.order) + 1):
             for comp in system.order:
                 system.write_inputs[comp](system.gather_inputs(comp))
