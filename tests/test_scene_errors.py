@@ -12,6 +12,12 @@ from conftest import SCENARIOS
 GOOD = (SCENARIOS / "servo_press.toml").read_text()
 
 
+def assert_names(error: SceneError, path, key: str, words: str) -> None:
+    """The message names the file, the key, and what is allowed or wrong."""
+    message = str(error)
+    assert str(path) in message and key in message and words in message, message
+
+
 def scene_file(tmp_path, text):
     path = tmp_path / "bad.toml"
     path.write_text(text)
@@ -39,8 +45,7 @@ def test_schema_errors_name_file_key_and_what_is_allowed(tmp_path, change, key, 
     path = scene_file(tmp_path, change(GOOD))
     with pytest.raises(SceneError) as err:
         load_scene(path)
-    message = str(err.value)
-    assert str(path) in message and key in message and words in message, message
+    assert_names(err.value, path, key, words)
 
 
 @pytest.mark.parametrize("change, key, words", [
@@ -63,8 +68,7 @@ def test_wiring_errors_are_found_before_anything_runs(tmp_path, fmu_dir, change,
     out = tmp_path / "out.csv"
     with pytest.raises(SceneError) as err:
         run_scene(load_scene(path), RunOptions(out=out, fmu_dir=fmu_dir, progress=False))
-    message = str(err.value)
-    assert str(path) in message and key in message and words in message, message
+    assert_names(err.value, path, key, words)
     assert not out.exists()
 
 
