@@ -20,7 +20,10 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--step", type=float, help="communication step [s]")
     p.add_argument("--algorithm", help="master algorithm")
     p.add_argument("--extrapolation", type=int, choices=(0, 1, 2), help="input extrapolation order")
-    p.add_argument("--tolerance", type=float, help="FMU internal relative tolerance")
+    p.add_argument("--tolerance", type=float,
+                   help="the iterative and adaptive masters' tolerance ([master].tolerance)")
+    p.add_argument("--fmu-tolerance", type=float,
+                   help="each FMU's internal relative tolerance ([master].fmu_tolerance)")
     p.add_argument("--fmus", type=Path, help="folder of built FMUs (default fmus/ beside scenarios/)")
     p.add_argument("--plot", action="store_true", help="also write a PNG of the recorded variables")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -38,11 +41,12 @@ def load_with_options(args):
         if args.stop_time <= scene.start_time:
             raise SceneError(scene.path, "--stop-time", f"must exceed start_time = {scene.start_time}")
         scene.stop_time = args.stop_time
-    for key in ("step", "tolerance"):
+    for key in ("step", "tolerance", "fmu_tolerance"):
         value = getattr(args, key, None)
         if value is not None:
             if value <= 0:
-                raise SceneError(scene.path, f"--{key}", f"must be > 0, got {value}")
+                raise SceneError(scene.path, f"--{key.replace('_', '-')}",
+                                 f"must be > 0, got {value}")
             setattr(m, key, value)
     if getattr(args, "algorithm", None):
         m.algorithm = args.algorithm

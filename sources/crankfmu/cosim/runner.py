@@ -53,7 +53,7 @@ def _setup(scene: Scene, fmus: dict[str, FmuInstance], log: LogCollector) -> Non
     for name, comp in scene.components.items():
         fmu = fmus[name]
         fmu.instantiate(logging_on=True)
-        fmu.setup(scene.start_time, scene.stop_time, scene.master.tolerance)
+        fmu.setup(scene.start_time, scene.stop_time, scene.master.fmu_tolerance)
         effects = {v: v[len("effect_"):] in comp.effects for v in fmu.variables
                    if v.startswith("effect_")}
         fmu.set_start_values({**effects, **comp.parameters})
@@ -124,7 +124,8 @@ def run_scene(scene: Scene, options: RunOptions | None = None) -> RunResult:
         "start_time": t0, "stop_time": scene.stop_time,
         "master": {"algorithm": scene.master.algorithm, "step": h,
                    "extrapolation": scene.master.extrapolation,
-                   "tolerance": scene.master.tolerance, "order": system.order},
+                   "tolerance": scene.master.tolerance,
+                   "fmu_tolerance": scene.master.fmu_tolerance, "order": system.order},
         "components": {n: {"fmu": str(f.path), "parameters": scene.components[n].parameters,
                            "effects": scene.components[n].effects} for n, f in fmus.items()},
         "versions": versions(), "wall_seconds": wall, "communication_steps": step,

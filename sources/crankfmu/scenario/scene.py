@@ -1,7 +1,9 @@
 """The scene file (TOML): what to simulate, wired how, run by which master, recording what.
 
     [scene]       name, description, start_time [s], stop_time [s]
-    [master]      algorithm, step [s], extrapolation (0, 1, 2), tolerance, order
+    [master]      algorithm, step [s], extrapolation (0, 1, 2), order, fmu_tolerance (each FMU's
+                  internal relative tolerance, via fmi2SetupExperiment), tolerance (the iterative
+                  and adaptive masters' own tolerance), max_iterations, min_step [s], max_step [s]
     [components.NAME]  fmu = "DcServoMotor" (built FMU name) or "path/to/file.fmu",
                        parameters = {name = value}, effects = ["name", ...]
     [[connections]]    from = "comp.output", to = "comp.input"
@@ -79,7 +81,8 @@ class Master:
     algorithm: str = "gauss-seidel"
     step: float = 1e-3
     extrapolation: int = 0
-    tolerance: float = 1e-8
+    tolerance: float = 1e-6       # iterative/adaptive masters: interface convergence / step error
+    fmu_tolerance: float = 1e-8   # each FMU's internal solver (fmi2SetupExperiment)
     order: list[str] = field(default_factory=list)
     max_iterations: int = 20
     min_step: float = 1e-6
@@ -143,7 +146,7 @@ def _parse_master(path, raw: dict) -> Master:
             raise SceneError(path, "[master].algorithm",
                              f"{raw['algorithm']!r} is not one of {', '.join(ALGORITHMS)}")
         m.algorithm = raw["algorithm"]
-    for key in ("step", "tolerance", "min_step", "max_step"):
+    for key in ("step", "tolerance", "fmu_tolerance", "min_step", "max_step"):
         if key in raw:
             setattr(m, key, _number(path, f"[master].{key}", raw[key], positive=True))
     if "extrapolation" in raw:
