@@ -54,8 +54,8 @@ def motor_law(linear: bool, m=MOTOR):
     return lambda w: 2.0 * M_k * (1.0 - w / w_s) * s_k / ((1.0 - w / w_s) ** 2 + s_k ** 2)
 
 
-def steady_speed(torque, M_needed: float, w_lo=50.0, w_hi=None) -> float:
-    w_hi = w_hi if w_hi is not None else MOTOR["n_sync"] * math.pi / 30.0
+def steady_speed(torque, M_needed: float, w_lo=50.0, w_hi=None, m=MOTOR) -> float:
+    w_hi = w_hi if w_hi is not None else m["n_sync"] * math.pi / 30.0
     return brentq(lambda w: torque(w) - M_needed, w_lo, w_hi, xtol=1e-14, rtol=1e-15)
 
 
@@ -83,21 +83,21 @@ def brake_laws(scene: str, d=DRIVE, power=None):
             lambda t: d["Mp_h"] * (1.0 - math.exp(-d["alpha_h"] * t)))
 
 
-def initial_speeds(scene: str, torque, d=DRIVE):
+def initial_speeds(scene: str, torque, d=DRIVE, m=MOTOR):
     """Steady state before the command: idle (engage scene) or working stroke (stop scene)."""
     p = d["r_b"] / d["r_a"]
     if scene == "engage":  # carrier held, ring backwards: M = M_ca + M_cb/p
-        w_a = steady_speed(torque, d["M_ca"] + d["M_cb"] / p)
+        w_a = steady_speed(torque, d["M_ca"] + d["M_cb"] / p, m=m)
         return w_a, 0.0
-    w_a = steady_speed(torque, d["M_ca"] + d["M_ch"] / (1.0 + p))  # ring held
+    w_a = steady_speed(torque, d["M_ca"] + d["M_ch"] / (1.0 + p), m=m)  # ring held
     return w_a, w_a / (1.0 + p)
 
 
 # -- 1. monolithic Newton-Euler reference ------------------------------------------------------
 class NewtonEulerDrive:
-    def __init__(self, scene: str, linear: bool, d=DRIVE, power=None):
+    def __init__(self, scene: str, linear: bool, d=DRIVE, power=None, m=MOTOR):
         self.d, self.scene = d, scene
-        self.torque = motor_law(linear)
+        self.torque = motor_law(linear, m)
         self.Mtb, self.Mth = brake_laws(scene, d, power)
         self.dir = {}
 
@@ -146,14 +146,14 @@ class NewtonEulerDrive:
 
 
 def reference_run(scene: str, linear: bool, t_end: float, rtol=1e-12, atol=1e-12,
-                  power=None) -> dict:
+                  power=None, m=MOTOR) -> dict:
     """Monolithic run from the steady state with the command at t = 0; returns the event list
     [(t, 'slip'/'lock'/'pass', member, direction)], the speeds (w_a, w_b, w_h) at each event,
-    end speeds and energies. With `power` the
+    end speeds and energies (motor `m`: nameplate dict as MOTOR). With `power` the
     brakes follow the power law and the integration is split at its kinks."""
-    ne = NewtonEulerDrive(scene, linear, power=power)
+    ne = NewtonEulerDrive(scene, linear, power=power, m=m)
     kinks = sorted({power[k] for k in ("tc_b", "tr_b", "tc_h", "tr_h")}) if power else []
-    w_a, w_h = initial_speeds(scene, ne.torque)
+    w_a, w_h = initial_speeds(scene, ne.torque, ne.d, m)
     mode = {"b": -1, "h": 0} if scene == "engage" else {"b": 0, "h": 1}
     y = np.array([w_a, w_h, 0.0, 0.0, 0.0, 0.0])
     t, events_seen, speeds = 0.0, [], []
@@ -214,13 +214,13 @@ def reference_run(scene: str, linear: bool, t_end: float, rtol=1e-12, atol=1e-12
 
 
 # -- 2. closed form with the linear motor law ---------------------------------------------------
-def closed_form(scene: str, t_end: float, d=DRIVE) -> dict:
+def closed_form(scene: str, t_end: float, d=DRIVE, m=MOTOR) -> dict:
     """Piecewise matrix-exponential solution, z = (w_b, w_h, e_b, e_h, 1)."""
     p = d["r_b"] / d["r_a"]
     Ja, Jb, Jh = d["J_a"], d["J_b"], d["J_h"]
     m11, m12, m22 = Ja * p * p + Jb, -Ja * p * (1 + p), Ja * (1 + p) ** 2 + Jh
-    c0 = motor_law(True)(0.0)
-    c1 = c0 - motor_law(True)(1.0)
+    c0 = motor_law(True, m)(0.0)
+    c1 = c0 - motor_law(True, m)(1.0)
     if scene == "engage":  # M_tb = Mp_b - Mp_b e_b, e_b = exp(-alpha_b t); M_th = Mp_h e_h
         lam = (d["alpha_b"], d["beta_h"])
         Mt = {"b": np.array([0, 0, -d["Mp_b"], 0, d["Mp_b"]]),
@@ -275,8 +275,8 @@ def closed_form(scene: str, t_end: float, d=DRIVE) -> dict:
                                    rtol=1e-15, maxiter=200)
         return None
 
-    torque = motor_law(True)
-    w_a0, w_h0 = initial_speeds(scene, torque)
+    torque = motor_law(True, m)
+    w_a0, w_h0 = initial_speeds(scene, torque, d, m)
     z0 = np.array([(-w_a0 + (1 + p) * w_h0) / p, w_h0, 1.0, 1.0, 1.0])
     if scene == "engage":
         mode1, held, mover = {"b": -1, "h": 0}, "h", "b"

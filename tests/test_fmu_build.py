@@ -30,7 +30,8 @@ def test_every_real_variable_has_a_unit_and_a_description(fmu_dir):
 def test_effects_are_fixed_boolean_parameters(fmu_dir):
     md = read_model_description(str(fmu_dir / "StephensonPress.fmu"))
     effects = {v.name: v for v in md.modelVariables if v.name.startswith("effect_")}
-    assert set(effects) == {"effect_gravity", "effect_forging_load", "effect_rod_inertia"}
+    assert set(effects) == {"effect_gravity", "effect_forging_load", "effect_rod_inertia",
+                            "effect_driven_crank"}
     for v in effects.values():
         assert (v.type, v.causality, v.variability) == ("Boolean", "parameter", "fixed")
 

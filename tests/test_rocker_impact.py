@@ -439,3 +439,17 @@ def test_second_approximation_matches_validity_estimate(table):
         assert validity(MO100.replace(S=row.S, k_n=row.k_n), row.c, row.c0)["mu"] == row.mu
     sa = second_approximation(MO100, table[(1.1, 80e6)].c, table[(1.1, 80e6)].c0)
     assert sa.dP(0.0) == 0.0 and sa.dT(0.0) == 0.0
+
+
+def test_claims_verdicts(table):
+    """`crankfmu analyze impact` states per reading which claims hold: the issue's tau bound of
+    the first approximation holds for S = 1.1 J/(m r) and fails for 0.9 (rows measured above)."""
+    from crankfmu.physics.rocker_analysis import claims, format_claims
+    items = claims(list(table.values()))
+    verdict = {(c.S_factor, c.text): c.holds for c in items}
+    tau = "1st approx. vs exact: contact duration tau within 1 %"
+    assert verdict[(1.1, tau)] and not verdict[(0.9, tau)]
+    pm_tm = "1st approx. vs exact: Pm and Tm within 0.5 %"
+    assert verdict[(1.1, pm_tm)] and verdict[(0.9, pm_tm)]
+    assert verdict[(1.1, "dT <= 2 kN")] and not verdict[(0.9, "dT <= 2 kN")]
+    assert format_claims(items).count("FAILS") == sum(not c.holds for c in items)

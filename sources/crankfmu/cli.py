@@ -18,8 +18,12 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
                    help="override a parameter (repeatable)")
     p.add_argument("--stop-time", type=float, help="end of the run [s]")
     p.add_argument("--step", type=float, help="communication step [s]")
-    p.add_argument("--algorithm", help="master algorithm")
-    p.add_argument("--extrapolation", type=int, choices=(0, 1, 2), help="input extrapolation order")
+    from .cosim.masters import MASTERS
+    p.add_argument("--algorithm", choices=sorted(MASTERS),
+                   help="master algorithm ([master].algorithm)")
+    p.add_argument("--extrapolation", type=int, choices=(0, 1, 2),
+                   help="input extrapolation order: polynomial through the last 1, 2, 3 "
+                        "communication points ([master].extrapolation)")
     p.add_argument("--tolerance", type=float,
                    help="the iterative and adaptive masters' tolerance ([master].tolerance)")
     p.add_argument("--fmu-tolerance", type=float,
@@ -62,10 +66,23 @@ def cmd_run(args) -> int:
     result = run_scene(scene, RunOptions(out=args.out, plot=args.plot, fmu_dir=args.fmus,
                                          progress=False if args.no_progress else None,
                                          verbose_log=args.log))
-    print(f"{scene.name}: {result.steps} steps of {scene.master.step:g} s with "
-          f"{scene.master.algorithm} in {result.wall_seconds:.2f} s wall")
+    m = scene.master
+    size = "variable steps" if m.algorithm == "adaptive" else f"steps of {m.step:g} s"
+    print(f"{scene.name}: {result.steps} {size} with {m.algorithm} (extrapolation "
+          f"{m.extrapolation}) in {result.wall_seconds:.2f} s wall")
     for name, st in result.statistics.items():
-        print(f"  {name}: {st['doStep_calls']} doStep calls, {st['doStep_seconds']:.3f} s")
+        print(f"  {name}: {st['doStep_calls']} doStep calls, {st['doStep_seconds']:.3f} s, "
+              f"{st['rollbacks']} rollbacks")
+    extra = {k: v for k, v in result.master_statistics.items()
+             if k not in ("algorithm", "extrapolation")}
+    if extra:
+        print("  master: " + ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
+                                       for k, v in extra.items()))
+    for port in result.coupling_error.get("ports", []):
+        rel = port["relative_mismatch"]
+        print(f"  coupling error at {port['driver']} -> {port['receiver']}: energy mismatch "
+              f"{port['mismatch_J']:.4g} J" + (f" ({rel:.3g} of {port['energy_throughput_J']:.4g}"
+                                                  f" J through the port)" if rel is not None else ""))
     print(f"wrote {result.csv}, {result.sidecar}" + (f", {result.png}" if result.png else ""))
     return 0
 

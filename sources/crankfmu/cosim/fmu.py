@@ -13,7 +13,10 @@ from pathlib import Path
 
 import numpy as np
 from fmpy import extract, read_model_description
-from fmpy.fmi2 import FMU2Slave, fmi2Boolean, fmi2Real, fmi2ValueReference
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import FMU2Slave, fmi2Real, fmi2ValueReference
+
+FMI2_WARNING = 1  # fmi2Status: a call returning more than fmi2Warning failed
 
 
 @dataclass
@@ -84,11 +87,12 @@ class FmuInstance:
         vrs = (fmi2ValueReference * n)(*[self.variable(v).valueReference for v in names])
         buf = (fmi2Real * n)()
         out = np.ctypeslib.as_array(buf)
-        get = self.slave.fmi2GetReal
+        get = self.slave._functions["fmi2GetReal"]  # raw ctypes: fmpy's wrapper costs ~2 us
 
         def read() -> np.ndarray:
-            if n:
-                get(self._component, vrs, n, buf)
+            status = get(self._component, vrs, n, buf) if n else 0
+            if status > FMI2_WARNING:
+                raise FMICallException(function="fmi2GetReal", status=status)
             return out
         return read
 
@@ -97,18 +101,23 @@ class FmuInstance:
         n = len(names)
         vrs = (fmi2ValueReference * n)(*[self.variable(v).valueReference for v in names])
         buf = (fmi2Real * n)()
-        setter = self.slave.fmi2SetReal
+        view = np.ctypeslib.as_array(buf)
+        setter = self.slave._functions["fmi2SetReal"]
 
         def write(values) -> None:
             if n:
-                buf[:] = [float(v) for v in values]
-                setter(self._component, vrs, n, buf)
+                view[:] = values
+                status = setter(self._component, vrs, n, buf)
+                if status > FMI2_WARNING:
+                    raise FMICallException(function="fmi2SetReal", status=status)
         return write
 
     def do_step(self, t: float, h: float) -> None:
         start = time.perf_counter()
-        self.slave.fmi2DoStep(self._component, t, h, fmi2Boolean(True))
+        status = self.slave._functions["fmi2DoStep"](self._component, t, h, 1)
         self.stats.do_step_seconds += time.perf_counter() - start
+        if status > FMI2_WARNING:
+            raise FMICallException(function="fmi2DoStep", status=status)
         self.stats.do_step_calls += 1
 
     # -- state rollback --------------------------------------------------------------------

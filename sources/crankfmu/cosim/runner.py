@@ -8,7 +8,7 @@ from pathlib import Path
 
 from fmpy.fmi1 import FMICallException
 
-from ..scenario.scene import Scene
+from ..scenario.scene import Scene, SceneError
 from .fmu import FmuInstance, LogCollector
 from .masters import DivergenceError, make_master
 from .results import Recorder, plot, versions, write_csv, write_sidecar
@@ -32,6 +32,8 @@ class RunResult:
     statistics: dict
     wall_seconds: float
     steps: int
+    master_statistics: dict = field(default_factory=dict)
+    coupling_error: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -86,29 +88,28 @@ def run_scene(scene: Scene, options: RunOptions | None = None) -> RunResult:
     check_components(scene, fmus)
     links = check_links(scene, fmus)
     system = System(scene, fmus, links)
-    master = make_master(scene.master.algorithm, system, scene.master)
+    try:
+        master = make_master(scene.master.algorithm, system, scene.master)
+    except ValueError as err:  # e.g. an FMU that cannot roll back, for a master that must
+        raise SceneError(scene.path, "[master]", str(err)) from None
     recorder, readers = _recorder(scene, fmus)
     h, t0 = scene.master.step, scene.start_time
-    n_steps = max(1, math.ceil((scene.stop_time - t0) / h - 1e-9))
-    every = max(1, round((scene.record_interval or h) / h))
     wall = time.perf_counter()
     failure = None
-    step = 0
+    step, t = 0, t0
     try:
         _setup(scene, fmus, log)
         master.initialize(t0)
         _sample(recorder, readers, t0)
-        for step in _progress(range(1, n_steps + 1), options.progress, scene.name):
-            t = t0 + (step - 1) * h
-            master.step(t, min(h, scene.stop_time - t))
-            t_new = min(t0 + step * h, scene.stop_time)
+        loop = _variable_steps if master.variable_step else _fixed_steps
+        for step, t, t_new, record in loop(master, scene, options.progress):
             master.check_finite(t_new)
-            if step % every == 0 or step == n_steps:
+            if record:
                 _sample(recorder, readers, t_new)
     except DivergenceError as err:
         failure = str(err)
     except FMICallException as err:
-        failure = _fmi_failure(err, fmus, log, t0 + max(step - 1, 0) * h)
+        failure = _fmi_failure(err, fmus, log, master.time if master.time is not None else t)
     finally:
         wall = time.perf_counter() - wall
         for fmu in fmus.values():
@@ -119,23 +120,64 @@ def run_scene(scene: Scene, options: RunOptions | None = None) -> RunResult:
     write_csv(out, recorder)
     sidecar = out.with_suffix(".json")
     statistics = master.statistics()
+    m = scene.master
     write_sidecar(sidecar, {
         "scene": str(scene.path), "name": scene.name, "status": failure or "completed",
         "start_time": t0, "stop_time": scene.stop_time,
-        "master": {"algorithm": scene.master.algorithm, "step": h,
-                   "extrapolation": scene.master.extrapolation,
-                   "tolerance": scene.master.tolerance,
-                   "fmu_tolerance": scene.master.fmu_tolerance, "order": system.order},
+        "master": {"algorithm": m.algorithm, "step": h, "extrapolation": m.extrapolation,
+                   "tolerance": m.tolerance, "fmu_tolerance": m.fmu_tolerance,
+                   "max_iterations": m.max_iterations, "min_step": m.min_step,
+                   "max_step": m.max_step, "order": system.order},
         "components": {n: {"fmu": str(f.path), "parameters": scene.components[n].parameters,
                            "effects": scene.components[n].effects} for n, f in fmus.items()},
         "versions": versions(), "wall_seconds": wall, "communication_steps": step,
-        "statistics": statistics, **options.extra_sidecar})
+        "statistics": statistics, "master_statistics": master.master_statistics(),
+        "coupling_error": master.coupling_error(), **options.extra_sidecar})
     if failure:
         raise RunError(failure, out)
     png = out.with_suffix(".png") if options.plot else None
     if png:
         plot(png, recorder, f"{scene.name}: {scene.master.algorithm}, step {h:g} s")
-    return RunResult(out, sidecar, png, recorder, statistics, wall, n_steps)
+    return RunResult(out, sidecar, png, recorder, statistics, wall, step,
+                     master.master_statistics(), master.coupling_error())
+
+
+def _fixed_steps(master, scene: Scene, progress):
+    """Steps of [master].step on the grid t0 + k h (the last one shortened to end at
+    stop_time); yields (step, t, t_new, record?) with rows every [record].interval."""
+    h, t0, stop = scene.master.step, scene.start_time, scene.stop_time
+    n_steps = max(1, math.ceil((stop - t0) / h - 1e-9))
+    every = max(1, round((scene.record_interval or h) / h))
+    for step in _progress(range(1, n_steps + 1), progress, scene.name):
+        t = t0 + (step - 1) * h
+        master.step(t, min(h, stop - t))
+        yield step, t, min(t0 + step * h, stop), step % every == 0 or step == n_steps
+
+
+def _variable_steps(master, scene: Scene, progress):
+    """Steps the master chooses (`next_step`); a row at every accepted point at least
+    [record].interval after the last row (every accepted point without an interval), and at
+    stop_time. A step that would leave less than min_step before stop_time is stretched to it."""
+    t, stop = scene.start_time, scene.stop_time
+    interval = scene.record_interval or 0.0
+    last_row, step = t, 0
+    bar = _progress(None, progress, scene.name, total=stop - t)
+    while t < stop:
+        h = master.next_step
+        if t + h > stop - scene.master.min_step:
+            h = stop - t
+        taken = master.step(t, h)
+        t_new = stop if taken == h and t + h >= stop - scene.master.min_step else t + taken
+        step += 1
+        if bar is not None:
+            bar.update(t_new - t)
+        record = t_new == stop or t_new - last_row >= interval * (1 - 1e-9)
+        if record:
+            last_row = t_new
+        yield step, t, t_new, record
+        t = t_new
+    if bar is not None:
+        bar.close()
 
 
 def _fmi_failure(err, fmus, log: LogCollector, t: float) -> str:
@@ -144,9 +186,13 @@ def _fmi_failure(err, fmus, log: LogCollector, t: float) -> str:
         (f"; the FMU said: {' | '.join(reasons)}" if reasons else "")
 
 
-def _progress(steps, enabled, label):
+def _progress(steps, enabled, label, total=None):
+    """A tqdm bar over `steps`, or (steps None) a bar over `total` seconds of simulated time."""
     if enabled is False:
         return steps
     from tqdm import tqdm
+    if steps is None:
+        return tqdm(total=total, desc=label, unit="s", disable=None if enabled is None else False,
+                    mininterval=0.5, leave=False, bar_format="{l_bar}{bar}| {n:.3g}/{total:.3g} s")
     return tqdm(steps, desc=label, unit="step", disable=None if enabled is None else False,
                 mininterval=0.5, leave=False)

@@ -9,7 +9,10 @@ FMU_MODELS: dict[str, str] = {
     "InductionMotor": "induction_motor:InductionMotor",
     "PlanetaryClutchDrive": "planetary_drive:PlanetaryClutchDrive",
     "RockerImpact": "rocker_impact:RockerImpact",
+    "CrankRockerHammer": "crank_rocker:CrankRockerHammer",
     "MillStandDrive": "mill_stand:MillStandDrive",
+    "Rotor": "rotor:Rotor",
+    "ShaftRotor": "rotor:ShaftRotor",
 }
 
 

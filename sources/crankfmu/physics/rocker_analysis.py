@@ -656,3 +656,71 @@ def format_impact_table(rows: Sequence[TableRow] | None = None) -> str:
             f"{r.max_dT / 1e3:>6.2f} | {r.Pm_exact / 1e3:>8.1f} {r.tau_exact * 1e3:>6.4f} "
             f"{abs(r.Tm_exact) / 1e3:>8.2f} | {r.eps:>6.4f} {r.mu:>6.4f}")
     return "\n".join(lines)
+
+
+# -- the paper's claims ------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Claim:
+    S_factor: float
+    text: str
+    holds: bool
+    measured: str
+
+
+def _pct(x: float) -> str:
+    return f"{100 * x:.2f} %"
+
+
+def claims(rows: Sequence[TableRow]) -> list[Claim]:
+    """The paper's statements about MO-100 (and the issue's agreement bounds of the first
+    approximation with the exact linear solution), checked per reading of S."""
+    out = []
+    for f in dict.fromkeys(r.S_factor for r in rows):
+        rs = sorted((r for r in rows if r.S_factor == f), key=lambda r: r.k_n)
+
+        def add(text, holds, measured):
+            out.append(Claim(f, text, bool(holds), measured))
+        add("Pm about 1 MN (within 10 %)", all(0.9e6 < r.Pm < 1.1e6 for r in rs),
+            ", ".join(f"{r.Pm / 1e3:.0f} kN" for r in rs))
+        ratios = ", ".join(_pct(r.ratio) for r in rs)
+        add("Tm about 17-18 % of Pm (within 16.5-18.5 %)",
+            all(0.165 <= r.ratio <= 0.185 for r in rs), ratios)
+        add("Tm strictly within 17-18 % of Pm", all(0.17 <= r.ratio <= 0.18 for r in rs), ratios)
+        mid = [r for r in rs if r.k_n == 80e6]
+        if mid:
+            r = mid[0]
+            add("dP <= 20 kN, about 2 % of Pm at k_n = 80e6",
+                r.max_dP <= 20e3 and 0.015 <= r.max_dP / r.Pm <= 0.025,
+                f"{r.max_dP / 1e3:.1f} kN = {_pct(r.max_dP / r.Pm)}")
+        dPs = [r.max_dP for r in rs]
+        add("dP decreases as the support stiffens", all(a > b for a, b in zip(dPs, dPs[1:])),
+            " -> ".join(f"{x / 1e3:.1f}" for x in dPs) + " kN")
+        add("2nd approximation lengthens the impact by < 1 %",
+            all(0.0 <= r.tau2 / r.tau - 1.0 < 0.01 for r in rs),
+            ", ".join(_pct(r.tau2 / r.tau - 1.0) for r in rs))
+        add("2nd approximation changes Pm by <= 0.2 %",
+            all(abs(r.Pm2 / r.Pm - 1.0) <= 2e-3 for r in rs),
+            ", ".join(_pct(r.Pm2 / r.Pm - 1.0) for r in rs))
+        add("dT <= 2 kN", all(r.max_dT <= 2e3 for r in rs),
+            ", ".join(f"{r.max_dT / 1e3:.2f} kN" for r in rs))
+        add("2nd approximation changes Tm by < 1 %",
+            all(abs(abs(r.Tm2) / abs(r.Tm) - 1.0) < 0.01 for r in rs),
+            ", ".join(_pct(abs(r.Tm2) / abs(r.Tm) - 1.0) for r in rs))
+        add("1st approx. vs exact: Pm and Tm within 0.5 %",
+            all(abs(r.Pm / r.Pm_exact - 1) < 5e-3 and abs(abs(r.Tm) / abs(r.Tm_exact) - 1) < 5e-3
+                for r in rs),
+            ", ".join(f"{_pct(abs(r.Pm / r.Pm_exact - 1))}/{_pct(abs(r.Tm / r.Tm_exact - 1))}"
+                      for r in rs))
+        add("1st approx. vs exact: contact duration tau within 1 %",
+            all(abs(r.tau / r.tau_exact - 1) < 1e-2 for r in rs),
+            ", ".join(_pct(1 - r.tau / r.tau_exact) for r in rs) + " short")
+    return out
+
+
+def format_claims(items: Sequence[Claim]) -> str:
+    lines = ["The paper's claims (and the issue's first-approximation bounds), per reading of S; "
+             "values per k_n in the table's order:"]
+    for c in items:
+        lines.append(f"  S = {c.S_factor:.2f} S_p  {'holds' if c.holds else 'FAILS':>5}  "
+                     f"{c.text}: {c.measured}")
+    return "\n".join(lines)

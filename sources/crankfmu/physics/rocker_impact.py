@@ -108,6 +108,12 @@ class RockerImpact(PhysicsModel):
         Variable("n_impacts", "1", "Number of impacts so far"),
         Variable("c_contact_used", "N/m", "Linear contact stiffness in use (0 with Hertz)"),
         Variable("c_support_used", "N/m", "Support stiffness in use (0 when pinned)"),
+        Variable("V_impact", "m/s", "Approach speed u0' + S theta' of the strike point when the "
+                 "last (or ongoing) impact began"),
+        Variable("u_support", "m", "Pivot displacement u0 along the tool axis (0 when pinned)"),
+        Variable("v_support", "m/s", "Pivot speed u0' (0 when pinned)"),
+        Variable("E_mech", "J", "Kinetic energy of rocker (+ drive inertia) + support and contact "
+                 "potential energy", depends_on=("flange_J",)),
     )
 
     def __init__(self, parameters=None, effects=None):
@@ -115,6 +121,16 @@ class RockerImpact(PhysicsModel):
         self._d = self._fresh_discrete(c=0.0, c0=None, contact=False)
 
     def check(self, p):
+        self._check_rocker(p, needs_V0=p.strike_at_start == 1.0)
+        if p.strike_at_start not in (0.0, 1.0):
+            raise ParameterError(self.model_name, "strike_at_start", p.strike_at_start, "0 or 1")
+        if p.strike_at_start == 0.0 and p.S * p.theta_start - p.tool_gap > 0.0:
+            raise ParameterError(self.model_name, "theta_start", p.theta_start,
+                                 f"<= tool_gap/S = {p.tool_gap / p.S:.6g} rad (the rocker may "
+                                 f"not start inside the tool)")
+
+    def _check_rocker(self, p, needs_V0: bool) -> None:
+        """Rocker, contact, rod and support data; V0 when the iterations (or the start) need it."""
         for name in ("m", "S", "R_c", "d", "E", "rho"):
             if getattr(p, name) <= 0.0:
                 raise ParameterError(self.model_name, name, getattr(p, name), "> 0")
@@ -124,20 +140,14 @@ class RockerImpact(PhysicsModel):
                                  f"pivot exceeds m r^2 by the central inertia J_C)")
         if p.nu >= 0.5:
             raise ParameterError(self.model_name, "nu", p.nu, "< 0.5")
-        if p.strike_at_start not in (0.0, 1.0):
-            raise ParameterError(self.model_name, "strike_at_start", p.strike_at_start, "0 or 1")
         needs_c = not self.on("hertz_contact") and p.c_contact == 0.0
         needs_c0 = self.on("support_compliance") and p.c_support == 0.0
-        if (needs_c or needs_c0 or p.strike_at_start == 1.0) and p.V0 <= 0.0:
+        if (needs_c or needs_c0 or needs_V0) and p.V0 <= 0.0:
             raise ParameterError(self.model_name, "V0", p.V0,
                                  "> 0 m/s (start speed / speed of the stiffness iteration)")
         if needs_c0 and p.k_n <= 0.0:
             raise ParameterError(self.model_name, "k_n", p.k_n,
                                  "> 0 when support_compliance is on and c_support = 0")
-        if p.strike_at_start == 0.0 and p.S * p.theta_start - p.tool_gap > 0.0:
-            raise ParameterError(self.model_name, "theta_start", p.theta_start,
-                                 f"<= tool_gap/S = {p.tool_gap / p.S:.6g} rad (the rocker may "
-                                 f"not start inside the tool)")
 
     # -- helpers ---------------------------------------------------------------------------
     @property
@@ -167,7 +177,7 @@ class RockerImpact(PhysicsModel):
 
     def _fresh_discrete(self, c, c0, contact):
         return {"contact": bool(contact), "n_impacts": 1 if contact else 0, "P_peak": 0.0,
-                "T_peak": 0.0, "c": c, "c0": c0}
+                "T_peak": 0.0, "c": c, "c0": c0, "V_impact": 0.0}
 
     def _split(self, x):
         """(u0, v0, theta, omega, w, impulse, E_rad, t_contact) whatever the effects."""
@@ -190,17 +200,26 @@ class RockerImpact(PhysicsModel):
         return self.contact_force(self.delta(x)) if self._d["contact"] else 0.0
 
     def _accelerations(self, x, u, P):
-        """(u0'', theta'', T)."""
+        """(u0'', theta'', T) with the drive torque u[0] and inertia u[1] on the rocker shaft."""
+        return self._rocker_accelerations(x, P, u[0], self.p.J + u[1])
+
+    def _support_force(self, u0: float, v0: float) -> float:
+        """T of the elastic support at displacement u0, speed v0."""
+        return self._d["c0"] * u0
+
+    def _rocker_accelerations(self, x, P, torque, J_t, F_axis=0.0):
+        """(u0'', theta'', T) for the contact force P, a torque on the rocker about the pivot,
+        the inertia J_t about the pivot and a further force F_axis on the rocker along the tool
+        axis (toward the tool). Pinned: T = -P - m r theta'' + F_axis is the pivot reaction."""
         p = self.p
-        u0 = self._split(x)[0]
-        J_t = p.J + u[1]
         if self.compliant:
-            T = self._d["c0"] * u0
+            u0, v0 = self._split(x)[:2]
+            T = self._support_force(u0, v0)
             det = p.m * (J_t - p.m * p.r ** 2)
-            f1, f2 = -P - T, -P * p.S + u[0]
+            f1, f2 = -P - T + F_axis, -P * p.S + torque
             return (J_t * f1 - p.m * p.r * f2) / det, (p.m * f2 - p.m * p.r * f1) / det, T
-        ddth = (-P * p.S + u[0]) / J_t
-        return 0.0, ddth, -P - p.m * p.r * ddth
+        ddth = (-P * p.S + torque) / J_t
+        return 0.0, ddth, -P - p.m * p.r * ddth + F_axis
 
     def support_force(self, x, u) -> float:
         return self._accelerations(x, u, self._force(x))[2]
@@ -266,6 +285,8 @@ class RockerImpact(PhysicsModel):
         d0 = p.S * theta - self.gap
         touching = d0 > 0.0 or (d0 == 0.0 and omega > 0.0)
         self._d = self._fresh_discrete(c, c0, touching)
+        if touching:
+            self._d["V_impact"] = float(p.S * omega)
         return x
 
     def derivatives(self, t, x, u):
@@ -284,16 +305,23 @@ class RockerImpact(PhysicsModel):
         return Z
 
     def output_values(self, t, x, u):
+        out = self._output_dict(t, x, u)
+        return np.array([out[v.name] for v in self.outputs], dtype=float)
+
+    def _output_dict(self, t, x, u) -> dict:
         d = self._d
         P = max(self._force(x), 0.0)
         T = self._accelerations(x, u, P)[2]
-        _, _, th, om, _, imp, E_rad, duration = self._split(x)
+        u0, v0, th, om, _, imp, E_rad, duration = self._split(x)
         P_peak, T_peak = d["P_peak"], d["T_peak"]
         if d["contact"]:
             P_peak, T_peak = max(P_peak, P), max(T_peak, abs(T))
-        return np.array([om, th, P, T, 1.0 if d["contact"] else 0.0, imp, E_rad, P_peak,
-                         T_peak, duration, float(d["n_impacts"]), d["c"] or 0.0,
-                         d["c0"] or 0.0], dtype=float)
+        return {"flange_w": om, "flange_phi": th, "P": P, "T": T,
+                "contact": 1.0 if d["contact"] else 0.0, "impulse": imp, "E_radiated": E_rad,
+                "P_peak": P_peak, "T_peak": T_peak, "impact_duration": duration,
+                "n_impacts": float(d["n_impacts"]), "c_contact_used": d["c"] or 0.0,
+                "c_support_used": d["c0"] or 0.0, "V_impact": d.get("V_impact", 0.0),
+                "u_support": u0, "v_support": v0, "E_mech": self.mechanical_energy(x, u)}
 
     # -- hybrid part -----------------------------------------------------------------------
     def event_functions(self, u_of_t):
@@ -339,7 +367,9 @@ class RockerImpact(PhysicsModel):
             self.observe(t, x, u)
             d["contact"] = False
         else:                     # contact begins: a new impact, fresh statistics
-            d.update(contact=True, n_impacts=d["n_impacts"] + 1, P_peak=0.0, T_peak=0.0)
+            _, v0, _, om, _, _, _, _ = self._split(x)
+            d.update(contact=True, n_impacts=d["n_impacts"] + 1, P_peak=0.0, T_peak=0.0,
+                     V_impact=float(v0 + self.p.S * om))
             names = self.state_names()
             x[names.index("impulse")] = x[names.index("t_contact")] = 0.0
             self.observe(t, x, u)

@@ -22,6 +22,17 @@ Motion (eq. 1):  J(phi) phi'' + J'(phi)/2 phi'^2 = i M_D + M_C(phi)
     M_C = (G5 - F5) S' + G2 r cos(phi) [+ 2 m_rod g y_C']  (gravity terms: effect gravity)
 Forging force (effect forging_load): F5 = F_max sin(pi x/forging_angle) for
 x = phi - (pi/2 - forging_angle) (mod 2 pi) in [0, forging_angle], else 0 (the window ends at BDC).
+
+Rigid coupling to a driving member that integrates the shaft itself (effect driven_crank; e.g. the
+carrier of PlanetaryClutchDrive, docs/models/planetary_drive.md section 6): the press then has no
+states; its input shaft follows the inputs shaft_phi, shaft_w (phi = phi_start + shaft_phi/i,
+phi' = shaft_w/i) and it returns what the shaft must carry, the two terms of eq. (1) that are not
+the acceleration's:
+    shaft_J   = J(phi)/i^2                           (added to the driver's inertia)
+    shaft_tau = (M_C(phi) - J'(phi)/2 phi'^2)/i      (added to the driver's torques)
+so the driver integrates J(phi) phi'' + J'/2 phi'^2 = i M_D + M_C exactly as the press would, with
+the driving torque M_D now an internal force of the rigid shaft. The outputs shaft_tau/shaft_J are
+also given in the default (integrating) mode, from the press's own state.
 """
 from __future__ import annotations
 
@@ -59,23 +70,36 @@ class StephensonPress(PhysicsModel):
         Effect("gravity", "Weights of slider, base link (and rods) in M_C"),
         Effect("forging_load", "Half-sine forging force on the slider over the window"),
         Effect("rod_inertia", "Mass and inertia of the two rods in J(phi) and M_C"),
+        Effect("driven_crank", "No states: the input shaft follows shaft_phi/shaft_w of a rigidly "
+               "coupled driver, which takes shaft_tau and shaft_J (rigid coupling)"),
     )
     inputs = (
         Variable("flange_tau", "N.m", "Drive torque M_D on the motor shaft", 0.0),
         Variable("flange_J", "kg.m2", "Inertia rigidly on the motor shaft (J_input)", 0.0,
                  min=0.0),
+        Variable("shaft_phi", "rad", "Input shaft angle i*(phi - phi_start) from the driver "
+                 "(effect driven_crank)", 0.0),
+        Variable("shaft_w", "rad/s", "Input shaft angular velocity i*phi' from the driver "
+                 "(effect driven_crank)", 0.0),
     )
+    _driven = ("shaft_phi", "shaft_w")  # feedthrough with effect driven_crank only
     outputs = (
-        Variable("flange_w", "rad/s", "Motor shaft angular velocity i*phi'"),
-        Variable("flange_phi", "rad", "Motor shaft angle i*phi"),
-        Variable("phi", "rad", "Crank angle (continuous, not wrapped)"),
-        Variable("w_crank", "rad/s", "Crank angular velocity phi'"),
-        Variable("slider_s", "m", "Slider position S, downward, r + l at BDC"),
-        Variable("slider_v", "m/s", "Slider velocity S' phi'"),
-        Variable("F5", "N", "Forging force on the slider"),
+        Variable("flange_w", "rad/s", "Motor shaft angular velocity i*phi'", depends_on=_driven),
+        Variable("flange_phi", "rad", "Motor shaft angle i*phi", depends_on=_driven),
+        Variable("phi", "rad", "Crank angle (continuous, not wrapped)", depends_on=_driven),
+        Variable("w_crank", "rad/s", "Crank angular velocity phi'", depends_on=_driven),
+        Variable("slider_s", "m", "Slider position S, downward, r + l at BDC",
+                 depends_on=_driven),
+        Variable("slider_v", "m/s", "Slider velocity S' phi'", depends_on=_driven),
+        Variable("F5", "N", "Forging force on the slider", depends_on=_driven),
         Variable("J_reduced", "kg.m2", "Reduced inertia J(phi) at the crank",
-                 depends_on=("flange_J",)),
-        Variable("M_C", "N.m", "Reduced resistance moment M_C(phi) at the crank"),
+                 depends_on=("flange_J",) + _driven),
+        Variable("M_C", "N.m", "Reduced resistance moment M_C(phi) at the crank",
+                 depends_on=_driven),
+        Variable("shaft_tau", "N.m", "Torque of the press on its input shaft apart from inertia, "
+                 "(M_C - J'/2 phi'^2)/i (for a rigidly coupled driver)", depends_on=_driven),
+        Variable("shaft_J", "kg.m2", "Press inertia at its input shaft J(phi)/i^2 (for a rigidly "
+                 "coupled driver)", depends_on=("flange_J",) + _driven),
     )
 
     def check(self, p):
@@ -154,21 +178,39 @@ class StephensonPress(PhysicsModel):
 
     # -- contract --------------------------------------------------------------------------
     def state_names(self):
-        return ("phi", "w_crank")
+        return () if self.on("driven_crank") else ("phi", "w_crank")
 
     def initial_state(self, u):
+        if self.on("driven_crank"):
+            return np.zeros(0)
         return np.array([self.p.phi_start, self.p.w_start])
 
+    def crank_motion(self, x, u) -> tuple[float, float]:
+        """(phi, phi'): the states, or with driven_crank the driver's shaft over the gear."""
+        if self.on("driven_crank"):
+            i = self.p.gear_ratio
+            return self.p.phi_start + u[2] / i, u[3] / i
+        return x[0], x[1]
+
+    def shaft_load(self, phi, w, J_input: float = 0.0) -> tuple[float, float]:
+        """(shaft_tau, shaft_J) at the input shaft for crank angle phi and speed w = phi'."""
+        i = self.p.gear_ratio
+        J, half_dJ = self.reduced_inertia(phi, J_input)
+        return (self.resistance_moment(phi) - half_dJ * w * w) / i, J / (i * i)
+
     def derivatives(self, t, x, u):
+        if self.on("driven_crank"):
+            return np.zeros(0)
         phi, w = x
         J, half_dJ = self.reduced_inertia(phi, u[1])
         dw = (self.p.gear_ratio * u[0] + self.resistance_moment(phi) - half_dJ * w * w) / J
         return np.array([w, dw])
 
     def output_values(self, t, x, u):
-        phi, w = x
+        phi, w = self.crank_motion(x, u)
         i = self.p.gear_ratio
         S, dS = self.kinematics(phi)[:2]
         J, _ = self.reduced_inertia(phi, u[1])
+        shaft_tau, shaft_J = self.shaft_load(phi, w, u[1])
         return np.array([i * w, i * phi, phi, w, S, dS * w, self.forging_force(phi), J,
-                         self.resistance_moment(phi)], dtype=float)
+                         self.resistance_moment(phi), shaft_tau, shaft_J], dtype=float)

@@ -9,6 +9,12 @@
     [[connections]]    from = "comp.output", to = "comp.input"
     [inputs]           "comp.input" = value | {table = [[t, v], ...], interpolation = "linear"|"step"}
     [record]           variables = ["comp.var", ...], interval [s] (default: the master step)
+    [swap]             base = "other.toml", replace = ["comp", ...]: this scene is the base scene
+                       with those components swapped and the tables here laid over it (rules in
+                       `crankfmu.scenario.swap`)
+    [analysis]         roles of recorded variables for `crankfmu compare` (crank_angle,
+                       crank_speed, drive_torque, drive_power, load_torque, from_time; see
+                       `crankfmu.compare`)
 
 This module checks the file's shape and values. Whether names exist in the FMUs, and whether
 connections match in causality, type and unit, is checked against the FMUs' model descriptions
@@ -249,12 +255,18 @@ def parse_scene(path: Path, data: dict) -> Scene:
 
 def load_scene(path) -> Scene:
     path = Path(path)
+    if path.suffix.lower() == ".ssp":  # an SSP archive (crankfmu export-ssp or another tool)
+        from ..ssp.load import load_ssp
+        return load_ssp(path)
     try:
         data = tomllib.loads(path.read_text())
     except FileNotFoundError:
         raise SceneError(path, "(file)", "no such scene file") from None
     except tomllib.TOMLDecodeError as err:
         raise SceneError(path, "(syntax)", f"not valid TOML: {err}") from None
+    if "swap" in data:
+        from .swap import resolve_swap
+        data = resolve_swap(path, data)
     return parse_scene(path, data)
 
 

@@ -5,7 +5,13 @@ Every FMU of crankfmu is this adapter with a different `physics_class`, so the p
 The variable table below fixes the value references; `crankfmu.fmi.model_description` writes the
 modelDescription.xml from the same table, so the two cannot disagree.
 
-Value references, in this order: parameters, effect switches (`effect_<name>`), inputs, outputs.
+Value references, in this order: parameters, effect switches (`effect_<name>`), inputs, outputs,
+then the input-derivative companions `<input>_d1` and `<input>_d2` (a crankfmu extension, see
+docs/architecture.md "Input extrapolation inside a step"): the first and second time derivative of
+each input at the current time. do_step integrates with the input polynomial
+u(t0 + s) = u + u_d1 s + u_d2 s^2/2 and leaves the input at its value at the step's end (outputs
+at t0 + h then see the input at t0 + h). They start at 0, so a host that ignores them gets a held
+input. They come last so that adding them left every other value reference unchanged.
 """
 from __future__ import annotations
 
@@ -17,7 +23,8 @@ from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
 from pythonfmu.enums import Fmi2Status
 from pythonfmu.default_experiment import DefaultExperiment
 
-from ..physics.base import IntegrationError, ParameterError, PhysicsModel, held
+from ..physics.base import (InputFunction, IntegrationError, ParameterError, PhysicsModel,
+                            held)
 
 DEFAULT_TOLERANCE = 1e-8  # relative tolerance of the internal solver when the host gives none
 
@@ -49,7 +56,26 @@ def variable_table(physics_class: type[PhysicsModel]) -> list[FmiVariable]:
     table += [FmiVariable(v.name, "Real", "output", "continuous", "calculated", v.unit,
                           v.description, None, v.min, v.max, v.depends_on)
               for v in physics_class.outputs]
+    table += [FmiVariable(f"{v.name}_d{k}", "Real", "input", "continuous", None,
+                          derivative_unit(v.unit, k),
+                          f"d{k}/dt{k} of {v.name} at the current time (crankfmu input "
+                          f"extrapolation; 0 = input held over the step)", 0.0)
+              for k in (1, 2) for v in physics_class.inputs]
     return table
+
+
+def derivative_unit(unit: str | None, order: int) -> str:
+    """The unit of the order-th time derivative: rad/s -> rad/s2, N.m -> N.m/s2."""
+    unit = unit or "1"
+    if unit.endswith("/s"):
+        return f"{unit}{order + 1}"
+    return f"{unit}/s" if order == 1 else f"{unit}/s{order}"
+
+
+def input_polynomial(t0: float, u: np.ndarray, d1: np.ndarray, d2: np.ndarray) -> InputFunction:
+    """u(t) = u + d1 (t - t0) + d2 (t - t0)^2 / 2: the input as the master extrapolates it."""
+    u, d1, half_d2 = np.array(u, dtype=float), np.array(d1, dtype=float), 0.5 * np.array(d2)
+    return lambda t: u + (t - t0) * (d1 + (t - t0) * half_d2)
 
 
 class ModelSlave(Fmi2Slave):
@@ -71,7 +97,10 @@ class ModelSlave(Fmi2Slave):
         self._values = [v.start if v.start is not None else 0.0 for v in self._table]
         n_par, n_eff, n_in = len(cls.parameters), len(cls.effects), len(cls.inputs)
         self._input_slice = slice(n_par + n_eff, n_par + n_eff + n_in)
-        self._output_slice = slice(n_par + n_eff + n_in, len(self._table))
+        n_out = len(cls.outputs)
+        self._output_slice = slice(n_par + n_eff + n_in, n_par + n_eff + n_in + n_out)
+        self._d1_slice = slice(self._output_slice.stop, self._output_slice.stop + n_in)
+        self._d2_slice = slice(self._d1_slice.stop, self._d1_slice.stop + n_in)
         for vr, var in enumerate(self._table):
             self._register(vr, var)
         self._model: PhysicsModel | None = None
@@ -91,7 +120,7 @@ class ModelSlave(Fmi2Slave):
 
     # -- values ----------------------------------------------------------------------------
     def _read(self, vr: int):
-        if self._outputs_stale and vr >= self._output_slice.start:
+        if self._outputs_stale and self._output_slice.start <= vr < self._output_slice.stop:
             self._refresh_outputs()
         return self._values[vr]
 
@@ -149,7 +178,11 @@ class ModelSlave(Fmi2Slave):
 
     def do_step(self, current_time, step_size):
         model = self._model
-        u_of_t = held(self._inputs())
+        u0 = self._inputs()
+        d1 = np.array(self._values[self._d1_slice], dtype=float)
+        d2 = np.array(self._values[self._d2_slice], dtype=float)
+        moving = bool(np.any(d1) or np.any(d2))
+        u_of_t = input_polynomial(current_time, u0, d1, d2) if moving else held(u0)
         atol = self._rtol * model.state_nominal()
         try:
             x = model.advance(current_time, self._x, step_size, u_of_t, self._rtol, atol)
@@ -164,6 +197,9 @@ class ModelSlave(Fmi2Slave):
             return False
         self._x = x
         self._time = current_time + step_size
+        if moving:  # the input (and its slope) now stand at the step's end
+            self._values[self._input_slice] = [float(v) for v in u_of_t(self._time)]
+            self._values[self._d1_slice] = [float(v) for v in d1 + step_size * d2]
         self._outputs_stale = True
         return True
 

@@ -1,9 +1,12 @@
 """Master algorithms, one file each on the shared base `Master` (see base.py for the contract)."""
+from .adaptive import Adaptive
 from .base import DivergenceError, Master
 from .gauss_seidel import GaussSeidel
+from .iterative import Iterative
 from .jacobi import Jacobi
 
-MASTERS: dict[str, type[Master]] = {"gauss-seidel": GaussSeidel, "jacobi": Jacobi}
+MASTERS: dict[str, type[Master]] = {
+    cls.name: cls for cls in (GaussSeidel, Jacobi, Iterative, Adaptive)}
 
 
 def make_master(algorithm: str, system, settings) -> Master:

@@ -1,7 +1,10 @@
 """Gauss-Seidel: components step one after another, each using the newest outputs.
 
 Component k steps from t with inputs from components before it already at t + h and from those
-after it still at t. The order is [master].order (default: the order of [components]).
+after it still at t. The order is [master].order (default: the order of [components]). With
+extrapolation order p, inputs from a source still at t follow the polynomial through its last
+p + 1 points; from a source already at t + h, the polynomial through that newest point and the p
+before it (interpolation: 0 holds the newest value). Global error order: p + 1.
 """
 from __future__ import annotations
 
@@ -9,11 +12,9 @@ from .base import Master
 
 
 class GaussSeidel(Master):
+    startup_corrector = True
     name = "gauss-seidel"
 
-    def step(self, t: float, h: float) -> float:
-        system = self.system
-        for comp in system.order:
-            self.advance_component(comp, t, h, system.gather_inputs(comp))
-            system.refresh_outputs(comp)
+    def _step(self, t: float, h: float) -> float:
+        self.sequential_sweep(t, h, self.extrapolation)
         return h

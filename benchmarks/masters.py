@@ -1,0 +1,355 @@
+"""What the masters cost: their own overhead per macro step, and wall time per accuracy.
+
+    python benchmarks/masters.py [--steps N] [--stop-time T] [--out DIR] [--quick]
+
+(a) Master overhead. Two no-op FMUs (no states, constant outputs: doStep returns at once),
+    built by crankfmu's build machinery from the benchmark-local physics class below, are wired
+    like the servo press (two connections each way, one constant external input, three recorded
+    outputs each) and run through crankfmu's runner with every fixed-step master. In the same
+    process the SAME FMU binaries are driven by the bare call sequence those masters make
+    (fmi2SetReal of the inputs, fmi2DoStep, fmi2GetReal of the coupled and of the recorded
+    outputs) through fmpy's raw ctypes function pointers, with nothing else in the loop. The
+    ratio crankfmu / bare is the master's (and runner's) own cost; target <= 1.5.
+    Per-step CPU times (time.process_time: the FMUs run in this process) are differences of a
+    2N-step and an N-step run (so loading and setup cancel), the best of 5 repeats.
+(b) Wall time to reach relative errors 1e-3 and 1e-5 (metric max of crankfmu accuracy: max over
+    time of |w - w_ref| / mean|w_ref| of the crank speed) on the servo press scene, per master and
+    extrapolation, read off the work-precision curve (log-log interpolation between the two runs
+    that bracket the target; marked ~ when extrapolated beyond the sweep), and as ratios to the
+    fastest master.
+
+Figures are printed, not asserted: timings depend on the machine.
+"""
+from __future__ import annotations
+
+import argparse
+import copy
+import math
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+NOOP = "NoOpBench"
+# (a) measures CPU time of this process (the FMUs run in it): on a shared machine wall time
+# mostly measures the other processes
+CLOCK = time.process_time
+
+NOOP_SCRIPT = '''"""No-op FMU for benchmarks/masters.py (build {digest}): no states, constant outputs."""
+import numpy as np
+from crankfmu_rt_{digest}.slaves.base import ModelSlave as Fmi2Slave
+from crankfmu_rt_{digest}.physics.base import PhysicsModel, Variable
+
+_OUT = np.array([1.0, 2.0, 3.0])
+
+
+class _NoOpPhysics(PhysicsModel):
+    model_name = "{name}"
+    description = "benchmark no-op: no states, constant outputs"
+    seed = "none"
+    inputs = (Variable("in_a", "1", "coupled input a"), Variable("in_b", "1", "coupled input b"),
+              Variable("in_u", "1", "external input"))
+    outputs = (Variable("out_a", "1", "coupled output a"), Variable("out_b", "1", "coupled output b"),
+               Variable("out_c", "1", "recorded output"))
+
+    def state_names(self):
+        return ()
+
+    def initial_state(self, u):
+        return np.zeros(0)
+
+    def derivatives(self, t, x, u):
+        return np.zeros(0)
+
+    def output_values(self, t, x, u):
+        return _OUT
+
+
+class {name}(Fmi2Slave):
+    physics_class = _NoOpPhysics
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+'''
+
+NOOP_SCENE = """
+[scene]
+name = "noop_pair"
+stop_time = {stop}
+[master]
+algorithm = "gauss-seidel"
+step = {step}
+order = ["a", "b"]
+[components.a]
+fmu = "{fmu}"
+[components.b]
+fmu = "{fmu}"
+[[connections]]
+from = "a.out_a"
+to = "b.in_a"
+[[connections]]
+from = "a.out_b"
+to = "b.in_b"
+[[connections]]
+from = "b.out_a"
+to = "a.in_a"
+[[connections]]
+from = "b.out_b"
+to = "a.in_b"
+[inputs]
+"a.in_u" = 220.0
+[record]
+variables = ["a.out_a", "a.out_b", "a.out_c", "b.out_a", "b.out_b", "b.out_c"]
+"""
+
+
+# -- the no-op FMU, built like the catalog FMUs ------------------------------------------------
+def build_noop(dest: Path) -> Path:
+    import zipfile
+
+    from pythonfmu.builder import FmuBuilder
+
+    from crankfmu.fmi.build import ZIP_DATE, _write_runtime, current_build_id
+    from crankfmu.fmi.model_description import model_description
+
+    digest = current_build_id()
+    dest.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix="crankfmu_bench_") as tmp:
+        tmp = Path(tmp)
+        runtime = _write_runtime(tmp, digest)
+        script = tmp / f"crankfmu_{digest}_{NOOP}.py"
+        script.write_text(NOOP_SCRIPT.format(digest=digest, name=NOOP))
+        sys.path.insert(0, str(tmp))
+        try:
+            built = FmuBuilder.build_FMU(script, dest=tmp / "out", project_files=[runtime])
+            slave_class = getattr(sys.modules[script.stem], NOOP)
+            target = dest / f"{NOOP}.fmu"
+            with zipfile.ZipFile(built) as z:
+                entries = {i.filename: z.read(i) for i in z.infolist() if not i.is_dir()}
+            entries["modelDescription.xml"] = model_description(slave_class, digest)
+            with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as z:
+                for name in sorted(entries):
+                    z.writestr(zipfile.ZipInfo(name, ZIP_DATE), entries[name])
+        finally:
+            sys.path.remove(str(tmp))
+            for name in [m for m in sys.modules if digest in m]:
+                del sys.modules[name]
+    return target
+
+
+def noop_scene(fmu: Path, folder: Path, step: float, stop: float):
+    from crankfmu.scenario import load_scene
+
+    path = folder / "noop_pair.toml"
+    path.write_text(NOOP_SCENE.format(stop=stop, step=step, fmu=fmu.as_posix()))
+    return load_scene(path)
+
+
+# -- (a) master overhead ---------------------------------------------------------------------------
+def crankfmu_seconds(scene, algorithm: str, extrapolation: int, n: int, out: Path) -> float:
+    """CPU time of n steps of the runner (a 2n-step run minus an n-step run, so loading and
+    initialization cancel)."""
+    from crankfmu.cosim.runner import RunOptions, run_scene
+
+    cpu = []
+    for k in (1, 2):
+        trial = copy.deepcopy(scene)
+        trial.master.algorithm, trial.master.extrapolation = algorithm, extrapolation
+        trial.stop_time = trial.start_time + k * n * trial.master.step
+        start = CLOCK()
+        run_scene(trial, RunOptions(out=out / "noop.csv", progress=False))
+        cpu.append(CLOCK() - start)
+    return cpu[1] - cpu[0]
+
+
+class BareFmu:
+    """One initialized FMU instance with raw ctypes calls for a fixed value-reference set."""
+
+    def __init__(self, name: str, path: Path, inputs, coupled, recorded):
+        from crankfmu.cosim.fmu import FmuInstance, LogCollector
+
+        self.log = LogCollector()  # same callbacks as the runner gives its instances
+        self.fmu = FmuInstance(name, path, self.log)
+        self.fmu.instantiate(logging_on=True)
+        self.fmu.setup(0.0, 1e9, 1e-8)
+        self.fmu.slave.enterInitializationMode()
+        self.fmu.set_start_values({"in_u": 220.0})
+        self.fmu.slave.exitInitializationMode()
+        f = self.fmu.slave._functions
+        self.c = self.fmu.slave.component
+        self.set_real, self.get_real, self.do_step = (f["fmi2SetReal"], f["fmi2GetReal"],
+                                                      f["fmi2DoStep"])
+        self.vr_in, self.buf_in = self._vrs(inputs)
+        self.vr_out, self.buf_out = self._vrs(coupled)
+        self.vr_rec, self.buf_rec = self._vrs(recorded)
+        self.vr_d, self.buf_d = self._vrs([f"{n}_{d}" for d in ("d1", "d2") for n in inputs])
+
+    def _vrs(self, names):
+        from fmpy.fmi2 import fmi2Real, fmi2ValueReference
+        vr = (fmi2ValueReference * len(names))(*[self.fmu.variable(n).valueReference
+                                                 for n in names])
+        return vr, (fmi2Real * len(names))()
+
+    def close(self) -> None:
+        self.fmu.terminate()
+
+
+def bare_seconds(fmu_path: Path, algorithm: str, extrapolation: int, n: int,
+                 step: float) -> float:
+    """The same FMI calls per step as the masters (Gauss-Seidel: set, doStep, get per FMU in
+    order; Jacobi: set+doStep for both, then get for both; with extrapolation >= 1 also the set
+    of the input-derivative companions <input>_d1, _d2), then the recorded outputs."""
+    a = BareFmu("a", fmu_path, ["in_a", "in_b"], ["out_a", "out_b"], ["out_a", "out_b", "out_c"])
+    b = BareFmu("b", fmu_path, ["in_a", "in_b"], ["out_a", "out_b"], ["out_a", "out_b", "out_c"])
+    pairs = ((a, b), (b, a))  # (fmu, the fmu its inputs come from)
+    try:
+        for fmu, _ in pairs:
+            fmu.get_real(fmu.c, fmu.vr_out, 2, fmu.buf_out)
+        start = CLOCK()
+        t = 0.0
+        for _ in range(n):
+            if algorithm == "jacobi":
+                for fmu, src in pairs:
+                    fmu.buf_in[0], fmu.buf_in[1] = src.buf_out[0], src.buf_out[1]
+            for fmu, src in pairs:
+                if algorithm != "jacobi":
+                    fmu.buf_in[0], fmu.buf_in[1] = src.buf_out[0], src.buf_out[1]
+                _check(fmu.set_real(fmu.c, fmu.vr_in, 2, fmu.buf_in))
+                if extrapolation:
+                    _check(fmu.set_real(fmu.c, fmu.vr_d, 4, fmu.buf_d))
+                _check(fmu.do_step(fmu.c, t, step, 1))
+                if algorithm != "jacobi":
+                    _check(fmu.get_real(fmu.c, fmu.vr_out, 2, fmu.buf_out))
+            if algorithm == "jacobi":
+                for fmu, _ in pairs:
+                    _check(fmu.get_real(fmu.c, fmu.vr_out, 2, fmu.buf_out))
+            for fmu, _ in pairs:
+                _check(fmu.get_real(fmu.c, fmu.vr_rec, 3, fmu.buf_rec))
+            t += step
+        return CLOCK() - start
+    finally:
+        a.close()
+        b.close()
+
+
+def _check(status: int) -> None:
+    if status > 1:
+        raise RuntimeError(f"FMI call returned status {status}")
+
+
+def overhead_table(fmu: Path, folder: Path, n: int, repeats: int = 5) -> list[tuple]:
+    from crankfmu.cosim.masters import MASTERS
+
+    step = 1e-3
+    scene = noop_scene(fmu, folder, step, n * step)
+    rows = []
+    bare_seconds(fmu, "gauss-seidel", 0, n // 10, step)  # warm-up: first calls load code
+    for algorithm in [a for a in MASTERS if a in ("gauss-seidel", "jacobi")]:
+        for ex in (0, 1, 2):
+            bare = min(bare_seconds(fmu, algorithm, ex, n, step) for _ in range(repeats)) / n
+            try:
+                ours = min(crankfmu_seconds(scene, algorithm, ex, n, folder)
+                           for _ in range(repeats)) / n
+            except ValueError as err:  # extrapolation not supported (yet)
+                print(f"  {algorithm} extrapolation {ex}: {err}")
+                continue
+            rows.append((algorithm, ex, ours, bare))
+    return rows
+
+
+# -- (b) wall time per accuracy --------------------------------------------------------------------
+def time_to_reach(points: list[tuple[float, float]], target: float) -> tuple[float, bool]:
+    """(wall time at which the work-precision curve reaches `target`, extrapolated?) from
+    (wall, error) points: log-log interpolation between the cheapest run meeting the target and
+    the most accurate run missing it; beyond the sweep, the line through the two most accurate
+    (or the two cheapest) runs."""
+    pts = sorted((w, e) for w, e in points if math.isfinite(e) and e > 0 and w > 0)
+    if len(pts) < 2:
+        return math.nan, True
+    meet = [p for p in pts if p[1] <= target]
+    miss = [p for p in pts if p[1] > target]
+    if meet and miss:
+        lo = min(meet)
+        hi = min(miss, key=lambda p: p[1])
+        pair, extrapolated = (hi, lo), False
+    elif meet:   # every run meets it: extrapolate towards cheaper runs
+        pair, extrapolated = tuple(sorted(pts)[:2]), True
+    else:        # none does: extrapolate from the most accurate two
+        pair, extrapolated = tuple(sorted(pts, key=lambda p: p[1])[:2]), True
+    (w1, e1), (w2, e2) = pair
+    if e1 == e2 or w1 == w2:
+        return (w1 if e1 <= target else math.nan), extrapolated
+    slope = math.log(w2 / w1) / math.log(e2 / e1)
+    return w1 * (target / e1) ** slope, extrapolated
+
+
+def accuracy_table(out: Path, stop: float, fmu_dir: Path | None, quick: bool):
+    from crankfmu.accuracy import AccuracyOptions, format_orders, run_accuracy
+    from crankfmu.scenario import load_scene
+
+    scene = load_scene(ROOT / "scenarios" / "servo_press.toml")
+    scene.stop_time = stop
+    steps = [8e-3, 4e-3, 2e-3, 1e-3] + ([] if quick else [5e-4, 2.5e-4])
+    result = run_accuracy(scene, AccuracyOptions(out_dir=out, steps=steps, fmu_dir=fmu_dir,
+                                                 tolerances=[1e-2, 1e-3, 1e-4]))
+    curves: dict[tuple, list] = {}
+    for o in result.outcomes:
+        if o.ok:
+            curves.setdefault((o.setting.algorithm, o.setting.extrapolation), []).append(
+                (o.wall_seconds, o.error))
+    return result, curves, format_orders(result.orders)
+
+
+def print_accuracy(curves: dict, targets=(1e-3, 1e-5)) -> None:
+    reach = {key: [time_to_reach(pts, t) for t in targets] for key, pts in curves.items()}
+    best = [min((r[k][0] for r in reach.values() if math.isfinite(r[k][0])), default=math.nan)
+            for k in range(len(targets))]
+    head = f"{'master':<13} {'ex':>2}" + "".join(
+        f"  {'wall @ %g [s]' % t:>16} {'ratio':>7}" for t in targets)
+    print(head)
+    print("-" * len(head))
+    for (alg, ex), r in sorted(reach.items()):
+        cells = ""
+        for k, (wall, extrapolated) in enumerate(r):
+            mark = "~" if extrapolated else " "
+            cells += f"  {mark}{wall:>15.3g} {wall / best[k]:>7.2f}"
+        print(f"{alg:<13} {ex:>2}{cells}")
+    print("(~: outside the swept range, extrapolated along the work-precision line; ratio: to "
+          "the fastest setting for that target)")
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=10000, help="macro steps for (a)")
+    parser.add_argument("--stop-time", type=float, default=0.5, help="servo press run [s], (b)")
+    parser.add_argument("--out", type=Path, default=Path(tempfile.gettempdir()) / "crankfmu_bench")
+    parser.add_argument("--fmus", type=Path, help="folder of built catalog FMUs for (b)")
+    parser.add_argument("--quick", action="store_true", help="fewer steps in (b)")
+    parser.add_argument("--skip", choices=("a", "b"), help="skip part a or b")
+    args = parser.parse_args(argv)
+    args.out.mkdir(parents=True, exist_ok=True)
+    if args.skip != "a":
+        fmu = build_noop(args.out / "noop_fmu")
+        print(f"(a) master overhead per macro step, 2 no-op FMUs ({fmu.name}), "
+              f"{args.steps} steps, CPU time per step, best of 5")
+        print(f"{'master':<13} {'ex':>2} {'crankfmu [us]':>14} {'bare FMI [us]':>14} {'ratio':>6}")
+        for alg, ex, ours, bare in overhead_table(fmu, args.out, args.steps):
+            print(f"{alg:<13} {ex:>2} {ours * 1e6:>14.1f} {bare * 1e6:>14.1f} "
+                  f"{ours / bare:>6.2f}")
+        print("target: ratio <= 1.5\n")
+    if args.skip != "b":
+        print(f"(b) servo press, 0 to {args.stop_time:g} s: wall time to reach a relative error")
+        result, curves, orders = accuracy_table(args.out / "accuracy", args.stop_time,
+                                                args.fmus, args.quick)
+        print(f"error = {result.metric.describe()}")
+        print_accuracy(curves)
+        print(orders)
+        print(f"work-precision plot: {result.png}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

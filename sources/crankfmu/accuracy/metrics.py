@@ -1,0 +1,124 @@
+"""Error metrics of a run against the monolithic reference, and the observed convergence order.
+
+Metrics (all relative, dimensionless; the reference is sampled at the run's own record times,
+so sampling effects are the same on both sides and only the coupling error remains):
+
+    max     max over the record grid and the chosen variables of |y - y_ref| / mean|y_ref|
+            (default variables: the recorded crank speeds `*.w_crank`, else every recorded
+            variable). The default metric: it sees the whole run, run-up included.
+    steady  over the last `cycles` whole crank revolutions (needs `C.phi` and `C.w_crank` of one
+            component recorded): the larger of the relative errors of the mean crank speed
+            2 pi n / T_n and of the non-uniformity delta = (w_max - w_min) / w_mean.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+TWO_PI = 2.0 * math.pi
+METRICS = ("max", "steady")
+
+
+class MetricError(ValueError):
+    """A metric that cannot be evaluated on this scene; says what is missing."""
+
+
+class ReferenceSamples:
+    """The reference's recorded columns, looked up at a run's record times: exact where the
+    times are reference grid points (the usual case: the grid is the union of the runs' grids),
+    else by a cubic spline through the grid."""
+
+    def __init__(self, times: np.ndarray, columns: dict[str, np.ndarray]):
+        self.times, self.columns = np.asarray(times, dtype=float), columns
+        self._splines = {}
+
+    def at(self, name: str, t: np.ndarray) -> np.ndarray:
+        t = np.asarray(t, dtype=float)
+        k = np.clip(np.searchsorted(self.times, t), 0, len(self.times) - 1)
+        k_left = np.clip(k - 1, 0, None)
+        k = np.where(np.abs(self.times[k_left] - t) < np.abs(self.times[k] - t), k_left, k)
+        scale = max(1.0, float(np.max(np.abs(self.times))))
+        if np.all(np.abs(self.times[k] - t) <= 1e-12 * scale):
+            return self.columns[name][k]
+        if name not in self._splines:
+            from scipy.interpolate import CubicSpline
+            self._splines[name] = CubicSpline(self.times, self.columns[name])
+        return self._splines[name](t)
+
+
+@dataclass
+class Metric:
+    name: str
+    variables: list[str]
+    cycles: int = 1
+
+    def describe(self) -> str:
+        if self.name == "max":
+            return f"max_t |y - y_ref| / mean|y_ref| over {', '.join(self.variables)}"
+        return (f"max(rel. error of mean speed, rel. error of delta) over the last "
+                f"{self.cycles} revolution(s) of {self.variables[0].rsplit('.', 1)[0]}")
+
+    def error(self, t: np.ndarray, run: dict[str, np.ndarray], ref: ReferenceSamples) -> float:
+        if self.name == "max":
+            return max(_max_relative(run[v], ref.at(v, t)) for v in self.variables)
+        phi_name, w_name = self.variables
+        mine = steady_figures(t, run[phi_name], run[w_name], self.cycles)
+        theirs = steady_figures(t, ref.at(phi_name, t), ref.at(w_name, t), self.cycles)
+        return max(abs(a / b - 1.0) for a, b in zip(mine, theirs))
+
+
+def make_metric(name: str, recorded: list[str], variables: list[str] | None = None,
+                cycles: int = 1) -> Metric:
+    if name not in METRICS:
+        raise MetricError(f"unknown metric {name!r}; metrics: {', '.join(METRICS)}")
+    for v in variables or []:
+        if v not in recorded:
+            raise MetricError(f"--variables: {v} is not recorded; [record].variables: "
+                              f"{', '.join(recorded)}")
+    if name == "max":
+        chosen = variables or [v for v in recorded if v.endswith(".w_crank")] or list(recorded)
+        if not chosen:
+            raise MetricError("the scene records no variables ([record].variables)")
+        return Metric("max", chosen)
+    comps = [v.rsplit(".", 1)[0] for v in recorded if v.endswith(".w_crank")
+             and v.replace(".w_crank", ".phi") in recorded]
+    if variables:
+        comps = [v.rsplit(".", 1)[0] for v in variables if v.rsplit(".", 1)[0] in comps]
+    if not comps:
+        raise MetricError("metric steady needs the crank angle and speed of one component "
+                          "recorded (C.phi and C.w_crank in [record].variables)")
+    return Metric("steady", [f"{comps[0]}.phi", f"{comps[0]}.w_crank"], cycles)
+
+
+def _max_relative(y: np.ndarray, y_ref: np.ndarray) -> float:
+    scale = float(np.mean(np.abs(y_ref)))
+    if scale == 0.0:
+        scale = 1.0  # a variable that is zero in the reference: absolute error
+    return float(np.max(np.abs(y - y_ref)) / scale)
+
+
+def steady_figures(t, phi, w, cycles: int = 1) -> tuple[float, float]:
+    """(mean speed 2 pi n / T [rad/s], delta [1]) over the last n whole revolutions; the
+    crossings of phi = 2 pi k are located by linear interpolation in time."""
+    k_end = math.floor(phi[-1] / TWO_PI)
+    if k_end - cycles < math.ceil(phi[0] / TWO_PI) or not np.all(np.diff(phi) > 0):
+        raise MetricError(f"the run covers no {cycles} whole crank revolution(s) with the "
+                          f"crank turning forwards: lengthen --stop-time or use --metric max")
+    ends = [float(np.interp(TWO_PI * k, phi, t)) for k in (k_end - cycles, k_end)]
+    inside = (t >= ends[0]) & (t <= ends[1])
+    mean = TWO_PI * cycles / (ends[1] - ends[0])
+    return mean, float((w[inside].max() - w[inside].min()) / mean)
+
+
+def observed_order(steps, errors, floor: float) -> tuple[float, int]:
+    """(slope of log error over log step, points used), over the finite errors above `floor`
+    (below it the FMUs' own tolerance, not the coupling, sets the error). nan with < 2 points."""
+    h = np.asarray(steps, dtype=float)
+    e = np.asarray(errors, dtype=float)
+    use = np.isfinite(e) & (e > floor) & (h > 0)
+    if np.count_nonzero(use) < 2 or len(np.unique(h[use])) < 2:
+        return float("nan"), int(np.count_nonzero(use))
+    slope = np.polyfit(np.log(h[use]), np.log(e[use]), 1)[0]
+    return float(slope), int(np.count_nonzero(use))

@@ -1,0 +1,126 @@
+"""`crankfmu accuracy SCENE.toml`: what accuracy costs in wall time, per master setting.
+
+Sweeps algorithm x extrapolation x communication step (x FMU tolerance), compares every run with
+the monolithic reference (solved once, cached in --out DIR), and prints a table, the observed
+convergence orders and the cheapest setting meeting --target; writes accuracy.csv and
+work_precision.png into --out DIR.
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+
+def _floats(text: str) -> list[float]:
+    return [float(v) for v in text.split(",") if v.strip()]
+
+
+def _ints(text: str) -> list[int]:
+    return [int(v) for v in text.split(",") if v.strip()]
+
+
+def _names(text: str) -> list[str]:
+    return [v.strip() for v in text.split(",") if v.strip()]
+
+
+def register(sub) -> None:
+    from ..accuracy import DEFAULT_STEP_FACTORS, DEFAULT_TARGET, DEFAULT_TOLERANCES, METRICS
+    from ..cli import _add_run_options
+
+    p = sub.add_parser("accuracy", help="error vs wall time of master settings against the "
+                                        "monolithic reference (work-precision)")
+    _add_run_options(p)
+    for action in p._actions:  # run's --out is a CSV; here it is the output folder
+        if action.dest == "out":
+            action.help = "output folder (default results/<scene>_accuracy): accuracy.csv, " \
+                          "work_precision.png, reference.csv (cache), runs/"
+    p.add_argument("--algorithms", type=_names,
+                   help="comma list (default: every available master)")
+    p.add_argument("--extrapolations", type=_ints, help="comma list of 0, 1, 2 (default all)")
+    p.add_argument("--steps", type=_floats,
+                   help="communication steps [s], comma list (default: the scene's step x "
+                        + ", ".join(f"{f:g}" for f in DEFAULT_STEP_FACTORS) + ")")
+    p.add_argument("--tolerances", type=_floats,
+                   help="tolerances of a variable-step master, swept instead of the step "
+                        f"(default {','.join(f'{t:g}' for t in DEFAULT_TOLERANCES)})")
+    p.add_argument("--fmu-tolerances", type=_floats,
+                   help="FMU internal tolerances to sweep (default: the scene's fmu_tolerance)")
+    p.add_argument("--target", type=float, default=DEFAULT_TARGET,
+                   help=f"accuracy to meet, in the metric's units (default {DEFAULT_TARGET:g})")
+    p.add_argument("--metric", choices=METRICS, default="max",
+                   help="max (default): max over time of |y - y_ref|/mean|y_ref| of --variables; "
+                        "steady: rel. error of mean crank speed and of delta over the last "
+                        "--cycles whole revolutions (needs C.phi, C.w_crank recorded)")
+    p.add_argument("--variables", type=_names,
+                   help="recorded variables of the metric (default: the *.w_crank ones, else all)")
+    p.add_argument("--cycles", type=int, default=1, help="revolutions of metric steady")
+    p.add_argument("--rtol", type=float, default=1e-10, help="reference solver tolerance")
+    p.add_argument("--floor-factor", type=float, default=10.0,
+                   help="orders use errors above this x the FMU tolerance (default 10)")
+    p.set_defaults(func=run_accuracy_command)
+
+
+def run_accuracy_command(args) -> int:
+    from ..accuracy import AccuracyOptions, MetricError, format_orders, format_table, run_accuracy
+    from ..cli import load_with_options
+    from ..reference import CompositionError
+
+    scene = load_with_options(args)
+    options = AccuracyOptions(
+        out_dir=args.out or Path("results") / f"{scene.name}_accuracy",
+        algorithms=args.algorithms or ([args.algorithm] if args.algorithm else None),
+        extrapolations=args.extrapolations or ([args.extrapolation] if args.extrapolation
+                                               is not None else [0, 1, 2]),
+        steps=args.steps or ([args.step] if args.step else None),
+        fmu_tolerances=args.fmu_tolerances, metric=args.metric, variables=args.variables,
+        cycles=args.cycles, target=args.target, reference_rtol=args.rtol,
+        floor_factor=args.floor_factor, fmu_dir=args.fmus,
+        progress=False if args.no_progress else None)
+    if args.tolerances:
+        options.tolerances = args.tolerances
+    problem = _check_options(options)
+    if problem:
+        print(f"error: {problem}", file=sys.stderr)
+        return 2
+    try:
+        result = run_accuracy(scene, options)
+    except (CompositionError, MetricError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    print(f"{scene.name}: error = {result.metric.describe()}")
+    print(f"reference: {result.reference_csv}" + (" (cached)" if result.reference_cached else ""))
+    print(format_table(result.outcomes))
+    print(format_orders(result.orders))
+    _print_choice("cheapest in wall time", result.cheapest, args.target)
+    _print_choice("fewest doStep calls", result.fewest_steps, args.target)
+    print(f"wrote {result.csv}, {result.png}")
+    return 0
+
+
+def _check_options(o) -> str | None:
+    from ..cosim.masters import MASTERS
+
+    unknown = [a for a in o.algorithms or [] if a not in MASTERS]
+    if unknown:
+        return f"--algorithms: {', '.join(unknown)} not available; available: {', '.join(MASTERS)}"
+    if any(x not in (0, 1, 2) for x in o.extrapolations):
+        return f"--extrapolations: {o.extrapolations}: each must be 0, 1 or 2"
+    for name, values in (("--steps", o.steps), ("--tolerances", o.tolerances),
+                         ("--fmu-tolerances", o.fmu_tolerances), ("--target", [o.target]),
+                         ("--rtol", [o.reference_rtol])):
+        if any(not v > 0 for v in values or []):
+            return f"{name}: every value must be > 0, got {values}"
+    if o.cycles < 1:
+        return f"--cycles must be >= 1, got {o.cycles}"
+    return None
+
+
+def _print_choice(what: str, o, target: float) -> None:
+    if o is None:
+        print(f"{what} meeting --target {target:g}: none of the runs")
+        return
+    s = o.setting
+    print(f"{what} meeting --target {target:g}: --algorithm {s.algorithm} --extrapolation "
+          f"{s.extrapolation} --step {s.step:g} --fmu-tolerance {s.fmu_tolerance:g}"
+          + (f" --tolerance {s.tolerance:g}" if o.knob == "tolerance" else "")
+          + f" (error {o.error:.2e}, {o.wall_seconds:.2f} s, {o.do_steps} doStep calls)")

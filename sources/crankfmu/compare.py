@@ -1,0 +1,203 @@
+"""Compare two scenes (a component swap): run both, align in time, report what matters.
+
+Which recorded variable plays which role comes from each scene's [analysis] table, never from
+here (the same press may be driven through different components):
+
+    [analysis]
+    crank_angle  = "press.phi"          # rad, continuous: strokes are its full revolutions
+    crank_speed  = "press.w_crank"      # rad/s
+    drive_torque = "motor.flange_tau"   # N m, the motor's torque
+    drive_power  = "motor.P_shaft"      # W, the motor's shaft power: energy per stroke
+    load_torque  = "press.M_C"          # N m, optional: the press's resistance moment
+    from_time    = 0.5                  # s, optional (default start_time): skip a run-up
+
+Strokes: the crank angle at from_time is phi0; stroke k ends when the crank angle first reaches
+phi0 + 2 pi k. The metrics use the complete strokes only, the window [from_time, end of the last
+complete stroke] (the whole run after from_time if there is none):
+
+    strokes, cycle time (mean stroke duration, pauses included), mean crank speed (time average),
+    delta = (w_max - w_min)/w_mean, peak |drive torque|, peak |load torque|, energy per stroke
+    (integral of drive_power over the window / strokes).
+
+The time series are also aligned on a common grid (A's recorded times within both runs) for the
+largest crank-speed difference and the overlay plot.
+"""
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+ROLES = ("crank_angle", "crank_speed", "drive_torque", "drive_power")
+OPTIONAL = ("load_torque",)
+NUMBERS = ("from_time",)
+
+
+@dataclass
+class Series:
+    label: str
+    time: np.ndarray
+    values: dict[str, np.ndarray]  # role -> samples
+    from_time: float
+
+
+def analysis_roles(scene) -> dict:
+    """The [analysis] table of `scene`, checked: role -> variable, plus from_time."""
+    from .scenario.scene import SceneError, _variable_ref
+    raw = scene.raw.get("analysis")
+    if not isinstance(raw, dict):
+        raise SceneError(scene.path, "[analysis]", "required by compare: name the variables "
+                         f"for {', '.join(ROLES)} (optional: {', '.join(OPTIONAL + NUMBERS)})")
+    unknown = set(raw) - set(ROLES + OPTIONAL + NUMBERS)
+    if unknown:
+        raise SceneError(scene.path, f"[analysis].{sorted(unknown)[0]}",
+                         f"unknown key; allowed: {', '.join(ROLES + OPTIONAL + NUMBERS)}")
+    out = {}
+    for role in ROLES + OPTIONAL:
+        if role in raw:
+            out[role] = _variable_ref(scene.path, f"[analysis].{role}", raw[role],
+                                      scene.components)
+        elif role in ROLES:
+            raise SceneError(scene.path, f"[analysis].{role}", "required by compare: the "
+                             "recorded variable (\"component.variable\") with this role")
+    out["from_time"] = float(raw.get("from_time", scene.start_time))
+    return out
+
+
+def run_for_comparison(scene, label: str, out_dir: Path, options) -> Series:
+    """Run `scene` (recording its analysis variables too) and return its role series."""
+    from dataclasses import replace
+    from .cosim.runner import run_scene
+    roles = analysis_roles(scene)
+    names = {r: v for r, v in roles.items() if r != "from_time"}
+    scene.record = list(dict.fromkeys(scene.record + list(names.values())))
+    result = run_scene(scene, replace(options, out=out_dir / f"{label}.csv"))
+    rec = result.recorder
+    return Series(label, rec.rows[:, 0].copy(),
+                  {r: rec.column(v).copy() for r, v in names.items()}, roles["from_time"])
+
+
+def stroke_ends(time: np.ndarray, angle: np.ndarray, t0: float) -> list[float]:
+    """Times the crank angle first reaches angle(t0) + 2 pi k, k = 1, 2, ... (interpolated)."""
+    phi0 = float(np.interp(t0, time, angle))
+    ends, k = [], 1
+    for i in range(1, len(time)):
+        if time[i] <= t0:
+            continue
+        while angle[i] >= phi0 + 2 * math.pi * k and angle[i - 1] < phi0 + 2 * math.pi * k:
+            target = phi0 + 2 * math.pi * k
+            s = (target - angle[i - 1]) / (angle[i] - angle[i - 1])
+            ends.append(float(time[i - 1] + s * (time[i] - time[i - 1])))
+            k += 1
+    return ends
+
+
+def metrics(s: Series) -> dict:
+    t, v = s.time, s.values
+    ends = stroke_ends(t, v["crank_angle"], s.from_time)
+    t_end = ends[-1] if ends else float(t[-1])
+    window = (t >= s.from_time) & (t <= t_end)
+    w = v["crank_speed"][window]
+    tw = t[window]
+    w_mean = float(np.trapezoid(w, tw) / (tw[-1] - tw[0])) if len(tw) > 1 else math.nan
+    starts = [s.from_time] + ends[:-1]
+    energy = float(np.trapezoid(v["drive_power"][window], tw)) if len(tw) > 1 else math.nan
+    out = {
+        "strokes": len(ends),
+        "cycle_time": float(np.mean(np.subtract(ends, starts))) if ends else math.nan,
+        "mean_crank_speed": w_mean,
+        "delta": float((w.max() - w.min()) / w_mean) if len(w) and w_mean else math.nan,
+        "peak_drive_torque": float(np.max(np.abs(v["drive_torque"][window]))),
+        "energy_per_stroke": energy / len(ends) if ends else math.nan,
+        "window_start": s.from_time, "window_end": t_end,
+    }
+    if "load_torque" in v:
+        out["peak_load_torque"] = float(np.max(np.abs(v["load_torque"][window])))
+    return out
+
+
+UNITS = {"strokes": "1", "cycle_time": "s", "mean_crank_speed": "rad/s", "delta": "1",
+         "peak_drive_torque": "N m", "peak_load_torque": "N m", "energy_per_stroke": "J",
+         "window_start": "s", "window_end": "s", "max_crank_speed_difference": "rad/s"}
+
+
+def aligned_difference(a: Series, b: Series, role: str = "crank_speed") -> float:
+    """max |a - b| of a role on A's recorded times within both runs (B interpolated)."""
+    lo, hi = max(a.time[0], b.time[0]), min(a.time[-1], b.time[-1])
+    grid = a.time[(a.time >= lo) & (a.time <= hi)]
+    return float(np.max(np.abs(np.interp(grid, a.time, a.values[role])
+                               - np.interp(grid, b.time, b.values[role]))))
+
+
+def compare_table(a: Series, b: Series) -> list[tuple]:
+    """Rows (metric, unit, A, B, B - A, (B - A)/|A|)."""
+    ma, mb = metrics(a), metrics(b)
+    rows = []
+    for key in UNITS:
+        if key == "max_crank_speed_difference":
+            d = aligned_difference(a, b)
+            rows.append((key, UNITS[key], 0.0, d, d, math.nan))
+        elif key in ma and key in mb:
+            va, vb = float(ma[key]), float(mb[key])
+            rel = (vb - va) / abs(va) if va and math.isfinite(va) else math.nan
+            rows.append((key, UNITS[key], va, vb, vb - va, rel))
+    return rows
+
+
+def format_table(rows, la: str, lb: str) -> str:
+    wa, wb = max(14, len(la) + 2), max(14, len(lb) + 2)
+    head = f"{'metric':<28}{'unit':<7}{la:>{wa}}{lb:>{wb}}{'B - A':>14}{'(B-A)/|A|':>11}"
+    lines = [head, "-" * len(head)]
+    for key, unit, va, vb, d, rel in rows:
+        lines.append(f"{key:<28}{unit:<7}{va:>{wa}.6g}{vb:>{wb}.6g}{d:>14.5g}"
+                     + (f"{rel:>11.3%}" if math.isfinite(rel) else f"{'':>11}"))
+    return "\n".join(lines)
+
+
+def write_table(path: Path, rows, la: str, lb: str) -> None:
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["metric", "unit", la, lb, "B_minus_A", "relative"])
+        for row in rows:
+            w.writerow([row[0], row[1]] + [repr(float(x)) for x in row[2:]])
+
+
+def overlay_plot(path: Path, a: Series, b: Series, title: str) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    panels = [("crank_speed", "crank speed [rad/s]"), ("drive_torque", "motor torque [N m]")]
+    if "load_torque" in a.values and "load_torque" in b.values:
+        panels.append(("load_torque", "press moment M_C [N m]"))
+    fig, axes = plt.subplots(len(panels), 1, sharex=True, figsize=(9, 2.6 * len(panels)))
+    for ax, (role, label) in zip(axes, panels):
+        for s, style in ((a, "-"), (b, "--")):
+            ax.plot(s.time, s.values[role], style, lw=1.0, label=s.label)
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="best")
+    axes[0].set_title(title)
+    axes[-1].set_xlabel("time [s]")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def compare_scenes(scene_a, scene_b, out_dir: Path, options) -> dict:
+    """Run both scenes into out_dir; write compare.csv and compare.png; return the results."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    la, lb = scene_a.name, scene_b.name
+    if la == lb:
+        la, lb = f"A_{la}", f"B_{lb}"
+    analysis_roles(scene_a), analysis_roles(scene_b)  # fail before running anything
+    a = run_for_comparison(scene_a, la, out_dir, options)
+    b = run_for_comparison(scene_b, lb, out_dir, options)
+    rows = compare_table(a, b)
+    write_table(out_dir / "compare.csv", rows, la, lb)
+    overlay_plot(out_dir / "compare.png", a, b, f"{la} (A) vs {lb} (B)")
+    return {"rows": rows, "text": format_table(rows, la, lb), "a": a, "b": b,
+            "csv": out_dir / "compare.csv", "png": out_dir / "compare.png"}

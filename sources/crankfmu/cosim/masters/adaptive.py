@@ -1,0 +1,80 @@
+"""Adaptive Gauss-Seidel: step-size control with an extrapolation-error estimate.
+
+Each step is a Gauss-Seidel sweep with extrapolation order p ([master].extrapolation; lower while
+the run has fewer than p + 1 points). Its error estimate costs no extra doStep: for every connected
+output, the gap between the value the FMU delivered at t + h and the value the extrapolation
+polynomial predicted for it,
+    err = max_i |y_i(t + h) - P_i(t + h)| / (tolerance * scale_i)
+(scale: the output's largest magnitude so far, at least its nominal). That gap is the input error
+the coupling makes over the step, O(h^(p+1)). A step with err > 1 is rejected: every FMU is rolled
+back to t and the step retried with h * max(0.2, 0.9 err^(-1/(p+1))); an accepted step proposes
+the next one as h * min(5, 0.9 err^(-1/(p+1))), always within [min_step, max_step]. A step at
+min_step is accepted whatever its error (counted in `accepted_above_tolerance`).
+"""
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from .base import Master, evaluate
+
+SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 5.0
+
+
+class Adaptive(Master):
+    name = "adaptive"
+    needs_rollback = True
+    variable_step = True
+
+    def __init__(self, system, settings):
+        super().__init__(system, settings)
+        self.tolerance = float(settings.tolerance)
+        self.min_step, self.max_step = float(settings.min_step), float(settings.max_step)
+        if self.min_step > self.max_step:
+            raise ValueError(f"[master].min_step = {self.min_step} exceeds max_step = "
+                             f"{self.max_step}")
+        self.next_step = self._clip(float(settings.step))
+        self.counts = {"accepted_steps": 0, "rejected_steps": 0, "accepted_above_tolerance": 0,
+                       "smallest_step": None, "largest_step": None}
+        self.extra_statistics = self.counts
+
+    def _clip(self, h: float) -> float:
+        return min(max(h, self.min_step), self.max_step)
+
+    def _step(self, t: float, h: float) -> float:
+        order = min(self.extrapolation, len(self.history.times) - 1)
+        states = self.save_states()
+        while True:
+            predicted = {c: evaluate(rows, h)
+                         for c, rows in self.source_coefficients(t, order).items()}
+            self.sequential_sweep(t, h, self.extrapolation)
+            error = self._error(predicted)
+            factor = SAFETY * error ** (-1.0 / (order + 1)) if error > 0 else MAX_FACTOR
+            if error <= 1.0 or h <= self.min_step * (1 + 1e-9):
+                break
+            self.counts["rejected_steps"] += 1
+            self.restore_states(states)
+            h = max(self.min_step, h * max(MIN_FACTOR, factor))
+        self.free_states(states)
+        self._count(t, h, error)
+        self.next_step = self._clip(h * min(MAX_FACTOR, factor))
+        return h
+
+    def _error(self, predicted: dict) -> float:
+        errors = [np.max(np.abs(y - predicted[c]) / (self.tolerance * self.error_scale(c, y)))
+                  for c, y in self.system.outputs.items() if y.size]
+        return float(max(errors, default=0.0))
+
+    def _count(self, t: float, h: float, error: float) -> None:
+        c = self.counts
+        c["accepted_steps"] += 1
+        c["smallest_step"] = min(h, c["smallest_step"] or h)
+        c["largest_step"] = max(h, c["largest_step"] or h)
+        if error > 1.0:
+            c["accepted_above_tolerance"] += 1
+            if c["accepted_above_tolerance"] == 1:
+                warnings.warn(f"adaptive master: step at t = {t:.6g} s accepted at min_step = "
+                              f"{self.min_step:g} s with error {error:.3g} x tolerance (further "
+                              f"ones are counted in the statistics: accepted_above_tolerance)",
+                              RuntimeWarning, stacklevel=2)

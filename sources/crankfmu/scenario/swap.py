@@ -1,0 +1,110 @@
+"""`[swap]`: a scene written as a base scene with components swapped (component swaps as an
+experiment: the same press with another drive, the same drive with another motor law, ...).
+
+    [swap]
+    base = "servo_press.toml"     # the base scene, relative to this file (may itself be a swap)
+    replace = ["motor"]           # base components removed together with every connection,
+                                  # [inputs] entry and recorded variable that names them
+
+Everything else in the file is laid over the base:
+* [scene], [master], [analysis], [record].interval: key by key (this file wins);
+* [components.X]: X in `replace` or new: taken from this file (needs `fmu`); X kept from the base
+  and also given here: `fmu` and `effects` replace the base's if given, `parameters` are updated
+  key by key (so `[components.press] parameters = {m5 = 80.0}` changes one value);
+* [[connections]]: the base's (minus the replaced components') plus this file's; a connection
+  here to an input the base already connects replaces the base's;
+* [inputs]: the base's (minus replaced components' and inputs connected here) updated by this
+  file's;
+* [record].variables: the base's (minus replaced components') followed by this file's, once each.
+The result is an ordinary scene (the merged table, with `swap` kept for the record).
+"""
+from __future__ import annotations
+
+import copy
+import tomllib
+from pathlib import Path
+
+
+def _error(path, key, msg):
+    from .scene import SceneError
+    return SceneError(path, key, msg)
+
+
+def _names(ref: str) -> str:
+    return ref.split(".", 1)[0]
+
+
+def _read(path: Path, seen: tuple) -> dict:
+    if path.resolve() in seen:
+        raise _error(path, "[swap].base", "the swap bases form a cycle: "
+                     + " -> ".join(str(p) for p in seen + (path.resolve(),)))
+    try:
+        data = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise _error(path, "(file)", "no such scene file") from None
+    except tomllib.TOMLDecodeError as err:
+        raise _error(path, "(syntax)", f"not valid TOML: {err}") from None
+    if "swap" in data:
+        data = resolve_swap(path, data, seen + (path.resolve(),))
+    return data
+
+
+def resolve_swap(path, data: dict, seen: tuple = ()) -> dict:
+    """The scene table `data` (read from `path`) with its [swap] resolved against its base."""
+    path = Path(path)
+    swap = data["swap"]
+    if not isinstance(swap, dict) or not isinstance(swap.get("base"), str):
+        raise _error(path, "[swap].base", "required: the base scene file, relative to this one")
+    unknown = set(swap) - {"base", "replace"}
+    if unknown:
+        raise _error(path, f"[swap].{sorted(unknown)[0]}", "unknown key; allowed: base, replace")
+    replace = swap.get("replace", [])
+    if not isinstance(replace, list) or not all(isinstance(r, str) for r in replace):
+        raise _error(path, "[swap].replace", "must be a list of component names of the base")
+    base_path = (path.parent / swap["base"])
+    base = copy.deepcopy(_read(base_path, seen or (path.resolve(),)))
+    missing = [r for r in replace if r not in base.get("components", {})]
+    if missing:
+        raise _error(path, "[swap].replace", f"{missing[0]!r} is not a component of {base_path}; "
+                     f"its components: {', '.join(base.get('components', {}))}")
+    gone = set(replace)
+    out = {k: v for k, v in base.items() if k not in ("components", "connections", "inputs",
+                                                      "record", "swap")}
+    for key in ("scene", "master", "analysis"):
+        if key in data:
+            out[key] = {**base.get(key, {}), **data[key]}
+    out["components"] = _components(path, base.get("components", {}), data.get("components", {}),
+                                    gone)
+    new_conn = data.get("connections", [])
+    connected_here = {c.get("to") for c in new_conn if isinstance(c, dict)}
+    out["connections"] = [c for c in base.get("connections", [])
+                          if _names(c.get("from", "")) not in gone
+                          and _names(c.get("to", "")) not in gone
+                          and c.get("to") not in connected_here] + list(new_conn)
+    out["inputs"] = {k: v for k, v in base.get("inputs", {}).items()
+                     if _names(k) not in gone and k not in connected_here}
+    out["inputs"].update(data.get("inputs", {}))
+    rec_base, rec_new = base.get("record", {}), data.get("record", {})
+    variables = [v for v in rec_base.get("variables", []) if _names(v) not in gone]
+    variables += [v for v in rec_new.get("variables", []) if v not in variables]
+    out["record"] = {**rec_base, **rec_new, "variables": variables}
+    out["swap"] = swap
+    return out
+
+
+def _components(path, base: dict, new: dict, gone: set) -> dict:
+    comps = {n: c for n, c in base.items() if n not in gone}
+    for name, comp in new.items():
+        if not isinstance(comp, dict):
+            raise _error(path, f"[components.{name}]", "must be a table")
+        if name not in comps:
+            comps[name] = comp
+            continue
+        merged = dict(comps[name])
+        for key, value in comp.items():
+            if key == "parameters":
+                merged["parameters"] = {**merged.get("parameters", {}), **value}
+            else:
+                merged[key] = value
+        comps[name] = merged
+    return comps

@@ -1,0 +1,56 @@
+"""Helpers shared by the importer tests (fmpy, C host, mixing): build the catalog, step an FMU."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+def build_catalog(dest: Path) -> dict[str, Path]:
+    """Every FMU of the catalog built into `dest` (new models are picked up automatically)."""
+    from crankfmu.fmi.build import build_all
+    from crankfmu.physics.catalog import FMU_MODELS
+
+    return dict(zip(FMU_MODELS, build_all(dest, list(FMU_MODELS))))
+
+
+def real_outputs(model_description) -> list:
+    return [v for v in model_description.modelVariables
+            if v.causality == "output" and v.type == "Real"]
+
+
+def step_together(specs, h: float, n_steps: int, rtol: float) -> dict[str, tuple[list, np.ndarray]]:
+    """Instantiate every FMU of `specs` [(instance name, FMU path, start values)] in this process
+    with fmpy (through crankfmu's FmuInstance), initialize them, then step them interleaved:
+    doStep(n h, h) for each in turn, n = 0 .. n_steps - 1. All Real outputs are sampled after
+    initialization and after every step. Returns {name: (output names, rows of [t, outputs])}."""
+    from crankfmu.cosim.fmu import FmuInstance
+
+    fmus = {name: FmuInstance(name, path) for name, path, _ in specs}
+    names = {n: [v.name for v in real_outputs(f.model_description)] for n, f in fmus.items()}
+    rows = {n: np.empty((n_steps + 1, len(names[n]) + 1)) for n in fmus}
+    try:
+        for name, _, start_values in specs:
+            fmus[name].instantiate()
+            fmus[name].setup(0.0, n_steps * h, rtol)
+            fmus[name].set_start_values(start_values or {})
+            fmus[name].slave.enterInitializationMode()
+            fmus[name].slave.exitInitializationMode()
+        read = {n: f.reader(names[n]) for n, f in fmus.items()}
+        for n in fmus:
+            rows[n][0] = [0.0, *read[n]()]
+        for k in range(n_steps):
+            for n, fmu in fmus.items():
+                fmu.do_step(k * h, h)
+                rows[n][k + 1] = [(k + 1) * h, *read[n]()]
+    finally:
+        for fmu in fmus.values():
+            if fmu._component is not None:
+                fmu.terminate()
+    return {n: (names[n], rows[n]) for n in fmus}
+
+
+def step_in_process(fmu_path: Path, h: float, n_steps: int, rtol: float,
+                    start_values: dict | None = None, name: str = "fmu") -> tuple[list, np.ndarray]:
+    """One FMU alone (see step_together): (output names, rows of [t, outputs...])."""
+    return step_together([(name, fmu_path, start_values)], h, n_steps, rtol)[name]

@@ -1,0 +1,167 @@
+"""The FMUs in a plain C host (tests/c_host/host.c), compiled here with gcc against libpython.
+
+The host owns the Python interpreter (DESIGN.md, "Hosts"): it starts Python before it dlopens an
+FMU, pointed at this test's Python environment, so pythonfmu's binary finds an interpreter
+running and imports numpy/scipy from the same site-packages as the test. Checks:
+- every catalog FMU, alone with its start values, gives bit-for-bit the outputs fmpy gives when
+  stepping the same FMU in this process (same code, same libraries, same floating-point ops);
+- the servo press scene wired by the host (Jacobi, 1 ms) agrees with crankfmu's Jacobi master.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import sysconfig
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fmpy import extract, read_model_description
+
+from crankfmu.physics.catalog import FMU_MODELS
+from importer_support import build_catalog, real_outputs, step_in_process
+
+HOST_SOURCE = Path(__file__).resolve().parent / "c_host" / "host.c"
+SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
+N_STEPS = 200  # 0.2 s at the default 1 ms step: enough to pass impacts, clutch and load events
+
+
+def libpython_flags() -> list[str]:
+    """gcc flags that link libpython: the shared library when there is one (also beside a static
+    build, e.g. Debian's in LIBPL), else the static archive with its symbols exported so that
+    the FMU binary (dlopened later, with undefined Py* symbols) and extension modules see them."""
+    cfg = sysconfig.get_config_var
+    version = f"{cfg('VERSION')}{getattr(sys, 'abiflags', '')}"
+    for folder in dict.fromkeys(filter(None, [cfg("LIBDIR"), cfg("LIBPL")])):
+        if (Path(folder) / f"libpython{version}.so").exists():
+            return [f"-L{folder}", f"-lpython{version}", f"-Wl,-rpath,{folder}"]
+    for folder in filter(None, [cfg("LIBPL"), cfg("LIBDIR")]):
+        archive = Path(folder) / (cfg("LIBRARY") or f"libpython{version}.a")
+        if archive.exists():
+            return [str(archive), "-Wl,--export-dynamic", *(cfg("LIBS") or "").split(),
+                    *(cfg("SYSLIBS") or "").split()]
+    pytest.skip(f"no libpython{version}.so or .a in LIBDIR={cfg('LIBDIR')} or LIBPL={cfg('LIBPL')}"
+                f": this Python ({sys.executable}) cannot be embedded")
+
+
+@pytest.fixture(scope="module")
+def host(tmp_path_factory) -> Path:
+    gcc = shutil.which("gcc")
+    if gcc is None:
+        pytest.skip("gcc not found on PATH: cannot compile the C host")
+    include = sysconfig.get_paths()["include"]
+    if not (Path(include) / "Python.h").exists():
+        pytest.skip(f"Python.h not in {include}: install this Python's development headers")
+    exe = tmp_path_factory.mktemp("c_host") / "host"
+    cmd = [gcc, "-O2", "-Wall", "-Wextra", "-Werror", "-o", str(exe), str(HOST_SOURCE),
+           f"-I{include}", *libpython_flags(), "-ldl", "-lm"]
+    done = subprocess.run(cmd, capture_output=True, text=True)
+    assert done.returncode == 0, f"{' '.join(cmd)}\n{done.stderr}"
+    return exe
+
+
+@pytest.fixture(scope="module")
+def catalog(tmp_path_factory) -> dict[str, Path]:
+    return build_catalog(tmp_path_factory.mktemp("fmus_c"))
+
+
+def fmu_line(name: str, fmu: Path, unzip_root: Path) -> str:
+    md = read_model_description(str(fmu))
+    unzip = extract(str(fmu), unzipdir=str(unzip_root / name))
+    return f"fmu {name} {unzip} {md.coSimulation.modelIdentifier} {md.guid}"
+
+
+def run_host(host: Path, config: list[str], tmp: Path) -> tuple[list[str], np.ndarray, str]:
+    """Run the host on a config (lines); returns (column names, rows, stderr)."""
+    path = tmp / "host.cfg"
+    # The venv's python as program name: Python reads its pyvenv.cfg and adds its site-packages.
+    path.write_text("\n".join([f"python {sys.executable}", *config]) + "\n")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PYTHON")}
+    done = subprocess.run([str(host), str(path)], capture_output=True, text=True, env=env,
+                          timeout=120)
+    assert done.returncode == 0, f"host failed ({done.returncode}):\n{done.stderr[-3000:]}"
+    header, *lines = done.stdout.splitlines()
+    rows = np.array([[float(v) for v in line.split(",")] for line in lines])
+    return header.split(",")[1:], rows, done.stderr
+
+
+def test_host_embeds_this_python_environment(host, catalog, tmp_path):
+    """The embedded interpreter is this environment's (same sys.prefix): the FMUs import the same
+    numpy/scipy/pythonfmu as fmpy in this process, which the bit-for-bit test relies on."""
+    _, _, stderr = run_host(host, [fmu_line("m", catalog["DcServoMotor"], tmp_path), "steps 1"],
+                            tmp_path)
+    expected = f"host: python {sys.version.split()[0]} prefix {sys.prefix}"
+    assert expected in stderr.splitlines(), stderr
+
+
+@pytest.mark.parametrize("model", list(FMU_MODELS))
+def test_every_fmu_alone_in_the_c_host_matches_fmpy_bit_for_bit(model, host, catalog, tmp_path):
+    fmu = catalog[model]
+    md = read_model_description(str(fmu))
+    h, rtol = float(md.defaultExperiment.stepSize), float(md.defaultExperiment.tolerance)
+    config = [fmu_line(model, fmu, tmp_path), f"step {h!r}", f"steps {N_STEPS}",
+              f"tolerance {rtol!r}"]
+    config += [f"output 0 {v.valueReference} {v.name}" for v in real_outputs(md)]
+    wall = time.perf_counter()
+    names, rows, _ = run_host(host, config, tmp_path)
+    wall = time.perf_counter() - wall
+    ref_names, ref = step_in_process(fmu, h, N_STEPS, rtol, name=model)
+    print(f"\n{model}: C host {N_STEPS} steps of {h:g} s in {wall:.2f} s wall (process incl. "
+          f"Python start), {len(names)} outputs, max |C - fmpy| = {np.max(np.abs(rows - ref)):.3g}")
+    assert names == ref_names
+    assert np.all(np.isfinite(rows))
+    # Same code, same libraries, same inputs (start values), same steps: the C host must give
+    # the very same doubles as fmpy (printed with %.17g, which round-trips exactly).
+    np.testing.assert_array_equal(rows, ref)
+
+
+def test_servo_press_pair_wired_by_the_c_host_matches_crankfmu_jacobi(host, catalog, tmp_path):
+    """The host wires DcServoMotor and StephensonPress itself (Jacobi, 1 ms, the scene's
+    parameters, effects, inputs and connections) and must agree with crankfmu's Jacobi master."""
+    from crankfmu.cosim.runner import RunOptions, run_scene
+    from crankfmu.scenario import load_scene
+
+    scene = load_scene(SCENARIOS / "servo_press.toml")
+    scene.master.algorithm = "jacobi"
+    scene.stop_time = 0.3  # s: the run-up, with the forging load hit near the end
+    h = scene.master.step
+    scene.record_interval = h
+    result = run_scene(scene, RunOptions(out=tmp_path / "jacobi.csv", fmu_dir=catalog["DcServoMotor"].parent,
+                                         progress=False))
+    order = scene.master.order + [c for c in scene.components if c not in scene.master.order]
+    mds = {c: read_model_description(str(catalog[scene.components[c].fmu])) for c in order}
+    vr = {c: {v.name: v.valueReference for v in md.modelVariables} for c, md in mds.items()}
+    index = {c: k for k, c in enumerate(order)}
+    config = [f"step {h!r}", f"steps {round(scene.stop_time / h)}",
+              f"tolerance {scene.master.fmu_tolerance!r}"]
+    for c in order:
+        comp = scene.components[c]
+        config.append(fmu_line(c, catalog[comp.fmu], tmp_path))
+        config += [f"bool {index[c]} {vr[c][name]} {int(name[7:] in comp.effects)}"
+                   for name in vr[c] if name.startswith("effect_")]
+        config += [f"real {index[c]} {vr[c][p]} {float(v)!r}" for p, v in comp.parameters.items()]
+    for target, signal in scene.inputs.items():
+        assert len(signal.times) == 1, "the host takes constant inputs only"
+        c, var = target.split(".", 1)
+        config.append(f"real {index[c]} {vr[c][var]} {signal.values[0]!r}")
+    for con in scene.connections:
+        (sc, sv), (tc, tv) = con.source.split(".", 1), con.target.split(".", 1)
+        config.append(f"link {index[sc]} {vr[sc][sv]} {index[tc]} {vr[tc][tv]}")
+    for ref in scene.record:
+        c, var = ref.split(".", 1)
+        config.append(f"output {index[c]} {vr[c][var]} {ref}")
+    names, rows, _ = run_host(host, config, tmp_path)
+
+    expected = result.recorder.rows
+    assert names == scene.record and rows.shape == expected.shape
+    scale = np.maximum(np.abs(expected), 1e-300)
+    worst = np.max(np.abs(rows - expected) / scale)
+    print(f"\nservo press, C host Jacobi vs crankfmu Jacobi at {h:g} s, {len(rows) - 1} steps: "
+          f"max relative difference {worst:.3g}; w_crank at {scene.stop_time} s = "
+          f"{rows[-1, 1 + names.index('press.w_crank')]:.9g} rad/s")
+    # The issue's bound: same algorithm, same numbers, 1e-9 relative (zeros must match exactly).
+    np.testing.assert_allclose(rows, expected, rtol=1e-9, atol=0.0)
+    assert rows[-1, 1 + names.index("press.phi")] > 1.0  # the press really turned (rad)
