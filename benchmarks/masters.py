@@ -39,6 +39,9 @@ NOOP = "NoOpBench"
 CLOCK = time.process_time
 
 NOOP_SCRIPT = '''"""No-op FMU for benchmarks/masters.py (build {digest}): no states, constant outputs."""
+if locals() is not globals():  # pythonfmu's findClass releases globals() after this run: see
+    import ctypes as _ctypes  # crankfmu/fmi/build.py ENTRY_SCRIPT
+    _ctypes.pythonapi.Py_IncRef(_ctypes.py_object(globals()))
 import numpy as np
 from crankfmu_rt_{digest}.slaves.base import ModelSlave as Fmi2Slave
 from crankfmu_rt_{digest}.physics.base import PhysicsModel, Variable

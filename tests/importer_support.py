@@ -1,9 +1,24 @@
-"""Helpers shared by the importer tests (fmpy, C host, mixing): build the catalog, step an FMU."""
+"""Helpers shared by the importer tests (fmpy, C host, mixing, ecos, SSP): build the catalog,
+step an FMU, load ecospy."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
+import pytest
+
+
+def require_ecospy() -> None:
+    """Skip (outside CI) when ecospy's library cannot load: its binaries need Debian's libtbb12,
+    which .ci/run installs; in CI a failure to load is an error, never a skip."""
+    try:
+        import ecospy  # noqa: F401
+    except OSError as err:
+        if os.environ.get("CI"):
+            raise
+        pytest.skip(f"ecospy cannot load its library ({err}); apt-get install libtbb12",
+                    allow_module_level=True)
 
 
 def build_catalog(dest: Path) -> dict[str, Path]:

@@ -8,7 +8,9 @@ import pytest
 from crankfmu.cosim.runner import RunOptions, run_scene
 from crankfmu.physics.catalog import FMU_MODELS
 
-pytest.importorskip("ecospy")  # its binaries also need Debian's libtbb12 (.ci/run installs it)
+from importer_support import require_ecospy
+
+require_ecospy()
 from crankfmu.interop import ecos  # noqa: E402
 from crankfmu.interop.plan import plan_scene, plan_single_fmu  # noqa: E402
 

@@ -239,3 +239,29 @@ def test_cli_run_prints_coupling_error(tmp_path, rotor_fmus, capsys):
     assert code == 0
     assert "with adaptive (extrapolation 1)" in out and "accepted_steps" in out
     assert "coupling error at r2 -> r1: energy mismatch" in out
+
+
+@pytest.mark.parametrize("s", [(0.0, -1e-3), (0.0, 1e-3), (0.0, -1e-3, -2e-3),
+                               (0.0, 1e-3, -1e-3), (0.0, 3e-4, -1.7e-3)])
+def test_taylor_rows_match_a_vandermonde_solve(s):
+    """The closed-form Newton rows against an independent Vandermonde solve of the same
+    interpolation problem. Row k is compared times h^k (h = the largest |s|): that is its
+    contribution to the input over a step, and the scaled problem is well conditioned, so both
+    agree to round-off (1e-12 of values of order 1; a wrong coefficient gives O(1))."""
+    from crankfmu.cosim.masters.base import taylor_rows
+
+    values = np.random.default_rng(7).normal(size=(len(s), 3))
+    h = max(abs(x) for x in s)
+    coeffs = np.linalg.solve(np.vander(np.array(s) / h, len(s), increasing=True), values)
+    factorials = np.array([1.0, 1.0, 2.0])[:len(s), None]
+    rows = taylor_rows(s, values) * (h ** np.arange(len(s)))[:, None]
+    assert np.max(np.abs(rows - coeffs * factorials)) < 1e-12
+
+
+def test_taylor_rows_hold_a_constant_exactly():
+    """A constant signal must reach the FMU with derivatives exactly 0 (it then integrates a
+    held input), and the value row must be the value itself: no round-off allowed."""
+    from crankfmu.cosim.masters.base import taylor_rows
+
+    rows = taylor_rows((0.0, -1e-3, -2e-3), np.array([[0.05, 572.0]] * 3))
+    assert rows[0].tolist() == [0.05, 572.0] and not np.any(rows[1:])

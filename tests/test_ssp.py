@@ -201,6 +201,8 @@ def test_libcosim_runs_the_archive_with_its_bindings(ssp, jacobi_reference):
 
 
 def test_ecos_runs_the_archive_with_its_bindings(scene, ssp, jacobi_reference):
+    from importer_support import require_ecospy
+    require_ecospy()
     from ecospy.EcosSimulation import EcosSimulation
 
     sim = EcosSimulation(step_size=scene.master.step, ssp_path=str(ssp))

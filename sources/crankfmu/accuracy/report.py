@@ -63,13 +63,17 @@ def plot_work_precision(path: Path, outcomes: list[Outcome], metric_text: str,
             groups.setdefault((s.algorithm, s.extrapolation, s.fmu_tolerance), []).append(o)
     several_ft = len({k[2] for k in groups}) > 1
     fig, axes = plt.subplots(1, 2, figsize=(12, 5.5), sharey=True)
-    markers = "osD^v<>pP*X"
-    for k, (key, group) in enumerate(sorted(groups.items())):
+    # colour per master, line style and marker per extrapolation order
+    masters = sorted({k[0] for k in groups})
+    colours = {m: f"C{i % 10}" for i, m in enumerate(masters)}
+    styles = {0: ("-", "o"), 1: ("--", "s"), 2: (":", "^")}
+    for key, group in sorted(groups.items()):
         # along the knob (coarse to fine), so timing noise shows as noise, not as a new order
         group.sort(key=lambda o: -o.knob_value)
         label = f"{key[0]}, extrapolation {key[1]}" + (f", fmu tol {key[2]:.0e}" if several_ft
                                                        else "")
-        style = dict(marker=markers[k % len(markers)], lw=1.2, ms=5, label=label)
+        ls, marker = styles.get(key[1], ("-.", "D"))
+        style = dict(color=colours[key[0]], ls=ls, marker=marker, lw=1.2, ms=5, label=label)
         axes[0].loglog([o.wall_seconds for o in group], [o.error for o in group], **style)
         axes[1].loglog([o.do_steps for o in group], [o.error for o in group], **style)
     for ax in axes:

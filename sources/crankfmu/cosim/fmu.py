@@ -5,8 +5,11 @@ fmpy's getReal/setReal build ctypes arrays on every call; a master calls them ev
 """
 from __future__ import annotations
 
+import atexit
 import ctypes
+import os
 import shutil
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,6 +20,57 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave, fmi2Real, fmi2ValueReference
 
 FMI2_WARNING = 1  # fmi2Status: a call returning more than fmi2Warning failed
+
+
+class _DlPhdrInfo(ctypes.Structure):  # the leading fields of glibc's struct dl_phdr_info
+    _fields_ = [("dlpi_addr", ctypes.c_void_p), ("dlpi_name", ctypes.c_char_p)]
+
+
+def _loaded_libraries() -> list[bytes]:
+    """Names of the shared objects loaded in this process, as the dynamic loader knows them."""
+    names: list[bytes] = []
+    callback_type = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.POINTER(_DlPhdrInfo), ctypes.c_size_t,
+                                     ctypes.c_void_p)
+
+    def collect(info, size, data) -> int:
+        if info.contents.dlpi_name:
+            names.append(info.contents.dlpi_name)
+        return 0
+    ctypes.CDLL(None).dl_iterate_phdr(callback_type(collect), None)
+    return names
+
+
+def release_pythonfmu_states() -> int:
+    """Release the interpreter state of every pythonfmu binary still loaded; returns how many.
+
+    pythonfmu 0.7.0's binary keeps a static std::shared_ptr<PyState> and resets it in a library
+    destructor (__attribute__((destructor))). At process exit, glibc runs the static destructors
+    (exit handlers) before the library destructors (_dl_fini), so for every binary still loaded
+    at exit the reset acts on an already destroyed shared_ptr: it decrements a counter in a freed
+    (possibly reused) heap block, which sporadically aborts the process after all work is done
+    ("corrupted double-linked list", SIGABRT; valgrind: invalid read in
+    finalizePythonInterpreter during _dl_fini). Calling the binary's exported
+    finalizePythonInterpreter while the process is still alive empties the shared_ptr, so both
+    destructors find nothing to do. In a Python host that is all it does: the PyState only
+    starts an interpreter when none runs. Registered with atexit below; safe to call twice.
+    """
+    if not sys.platform.startswith("linux"):
+        return 0  # measured on Linux only (glibc exit order); the Windows DllMain path differs
+    released = 0
+    for name in _loaded_libraries():
+        try:  # RTLD_NOLOAD: only a handle to the already loaded copy, never a new load
+            lib = ctypes.CDLL(os.fsdecode(name), mode=os.RTLD_NOLOAD | os.RTLD_LAZY)
+            release = lib.finalizePythonInterpreter
+            lib.fmi2Instantiate  # a pythonfmu FMU binary, not some other library
+        except (OSError, AttributeError):
+            continue
+        release.restype = None
+        release()
+        released += 1
+    return released
+
+
+atexit.register(release_pythonfmu_states)
 
 
 @dataclass

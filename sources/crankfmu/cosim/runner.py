@@ -75,8 +75,8 @@ def _recorder(scene: Scene, fmus) -> tuple[Recorder, list]:
 def _sample(recorder: Recorder, readers, t: float) -> None:
     row = [0.0] * len(recorder.names)
     for read, where in readers:
-        for k, v in zip(where, read()):
-            row[k] = float(v)
+        for k, v in zip(where, read().tolist()):  # Python floats: cheaper than numpy scalars
+            row[k] = v
     recorder.add(t, row)
 
 

@@ -34,6 +34,26 @@ for _sub in ("physics", "slaves"):
     for _module in pkgutil.iter_modules(_package.__path__):
         importlib.import_module(f"{{_package.__name__}}.{{_module.name}}")
 '''
+# The FMU's entry script. pythonfmu 0.7.0's binary (findClass, run by every fmi2Instantiate)
+# imports this module, runs its code once more with the module's namespace as globals and a
+# fresh dict as locals, and then calls Py_DECREF on that namespace, which it only borrowed
+# (PyModule_GetDict). One reference per instantiation is thus released that nobody took; the
+# namespace is freed while functions still use it as __globals__, and the process crashes
+# (second instance of a class-only script, or heap corruption at interpreter exit). The first
+# statement takes, on that second run only (locals is not globals there), the reference the
+# binary will release. Measured: tests/test_exit_crash.py.
+ENTRY_SCRIPT = '''"""FMU entry point written by crankfmu build {digest}."""
+if locals() is not globals():  # run by pythonfmu's findClass, which then releases globals()
+    import ctypes as _ctypes
+    _ctypes.pythonapi.Py_IncRef(_ctypes.py_object(globals()))
+# pythonfmu's loader finds the class by the literal text "class X(Fmi2Slave):"
+from crankfmu_rt_{digest}.slaves.base import ModelSlave as Fmi2Slave
+from crankfmu_rt_{digest}.physics.{module} import {cls} as _Physics
+
+
+class {model_name}(Fmi2Slave):
+    physics_class = _Physics
+'''
 ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # fixed timestamps: same sources give the same FMU bytes
 
 
@@ -48,7 +68,9 @@ def runtime_files() -> list[tuple[str, bytes]]:
 @functools.lru_cache(maxsize=1)
 def current_build_id() -> str:
     """Hash of the bundled runtime sources: the FMU's version and GUID seed (computed once)."""
-    return sources_digest(runtime_files())
+    templates = [("<entry script>", ENTRY_SCRIPT.encode()),
+                 ("<runtime init>", RUNTIME_INIT.encode())]  # a changed template: a new build
+    return sources_digest(runtime_files() + templates)
 
 
 def _write_runtime(dest: Path, digest: str) -> Path:
@@ -64,18 +86,8 @@ def _write_runtime(dest: Path, digest: str) -> Path:
 def _write_script(dest: Path, model_name: str, digest: str) -> Path:
     module, cls = FMU_MODELS[model_name].split(":")
     script = dest / f"crankfmu_{digest}_{model_name}.py"
-    script.write_text(
-        f'"""FMU entry point written by crankfmu build {digest}."""\n'
-        "# pythonfmu's loader finds the class by the literal text \"class X(Fmi2Slave):\"\n"
-        f"from crankfmu_rt_{digest}.slaves.base import ModelSlave as Fmi2Slave\n"
-        f"from crankfmu_rt_{digest}.physics.{module} import {cls} as _Physics\n\n\n"
-        f"class {model_name}(Fmi2Slave):\n"
-        "    physics_class = _Physics\n\n"
-        "    def __init__(self, **kwargs):\n"
-        "        # A function defined here holds a reference to this module's namespace (as its\n"
-        "        # __globals__): without one, pythonfmu 0.7.0's binary frees the namespace of a\n"
-        "        # class-only script when an instance is created, and the next instance crashes.\n"
-        "        super().__init__(**kwargs)\n")
+    script.write_text(ENTRY_SCRIPT.format(digest=digest, module=module, cls=cls,
+                                          model_name=model_name))
     return script
 
 
@@ -130,6 +142,7 @@ def build_fmu(model_name: str, dest: Path) -> Path:
         runtime = _write_runtime(tmp, digest)
         script = _write_script(tmp, model_name, digest)
         sys.path.insert(0, str(tmp))
+        loaded_before = set(sys.modules)  # e.g. the runtime of FMUs of this build already running
         try:
             built = FmuBuilder.build_FMU(script, dest=tmp / "out", project_files=[runtime])
             module = sys.modules[script.stem]
@@ -138,8 +151,8 @@ def build_fmu(model_name: str, dest: Path) -> Path:
             _repack(built, target, model_name, slave_class, digest)
         finally:
             sys.path.remove(str(tmp))
-            for name in [m for m in sys.modules if digest in m]:
-                del sys.modules[name]
+            for name in [m for m in sys.modules if digest in m and m not in loaded_before]:
+                del sys.modules[name]  # what the build imported from the temporary folder
     return target
 
 

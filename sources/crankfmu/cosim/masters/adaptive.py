@@ -26,6 +26,7 @@ class Adaptive(Master):
     name = "adaptive"
     needs_rollback = True
     variable_step = True
+    uses_error_scale = True
 
     def __init__(self, system, settings):
         super().__init__(system, settings)
@@ -45,9 +46,9 @@ class Adaptive(Master):
     def _step(self, t: float, h: float) -> float:
         order = min(self.extrapolation, len(self.history.times) - 1)
         states = self.save_states()
+        coefficients = self.source_coefficients(t, order)
         while True:
-            predicted = {c: evaluate(rows, h)
-                         for c, rows in self.source_coefficients(t, order).items()}
+            predicted = {c: evaluate(coefficients[c], h) for c in self.system.order}
             self.sequential_sweep(t, h, self.extrapolation)
             error = self._error(predicted)
             factor = SAFETY * error ** (-1.0 / (order + 1)) if error > 0 else MAX_FACTOR

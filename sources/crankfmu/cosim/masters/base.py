@@ -6,14 +6,17 @@ Implementers subclass `Master` and provide:
     name              the algorithm's name in scenes and on the command line (a key of MASTERS).
     _step(t, h)       advance every FMU from t; on return every FMU is at t + taken and
                       `system.outputs` holds the connected outputs at t + taken, and
-                      `self.seen[comp]` the inputs each FMU saw at the step's start and end
-                      (`advance_component` fills it). Return `taken` (= h unless the class sets
-                      `variable_step`).
+                      `self.seen[comp]` = (rows, taken): the inputs each FMU saw over the step
+                      as Taylor rows at its start (one row, held, for an FMU without companion
+                      inputs; `advance_component` fills it). Return `taken` (= h unless the
+                      class sets `variable_step`).
     needs_rollback    True if _step calls `save_states`/`restore_states`; the base then checks
                       canGetAndSetFMUstate for every FMU and names the one that cannot.
     variable_step     True if the master chooses its steps: the runner then asks `next_step`
                       for the next step to try and records at the accepted points.
     extra_statistics  dict of master-level figures for the JSON sidecar (iterations, rejections).
+    uses_error_scale  True if the class calls `error_scale` (the base then tracks each output's
+                      largest magnitude).
 
 The base class provides `initialize(t0)`, the public `step(t, h)` (calls `_step`, then keeps the
 communication-point history and the port energies), the input polynomials (`source_coefficients`,
@@ -46,15 +49,35 @@ class DivergenceError(RuntimeError):
         super().__init__(f"diverged at t = {time:.6g} s: {component}.{variable} = {value!r}")
 
 
-def taylor_rows(s: np.ndarray, values: np.ndarray) -> np.ndarray:
+def taylor_rows(s, values) -> np.ndarray:
     """Taylor rows at s = 0 (value, 1st, 2nd derivative) of the polynomial through the points
-    (s[i], values[i]) (degree len(s) - 1)."""
+    (s[i], values[i]) (1 to 3 points; put the point nearest 0 first). Newton's divided
+    differences, in Python floats: for a few values per component cheaper than numpy (a
+    Vandermonde solve cost more than the rest of a step). Built on differences, the rows of a
+    constant signal are exact (derivatives exactly 0: an FMU sees it held), and the value row
+    is values[0] exactly when s[0] = 0."""
     if len(s) == 1:
-        return values
-    coeffs = np.linalg.solve(np.vander(s, len(s), increasing=True), values)
-    if len(s) == 3:
-        coeffs[2] *= 2.0  # c2 s^2 = u'' s^2 / 2
-    return coeffs
+        return np.array([values[0]], dtype=float)
+    columns = zip(*[np.asarray(v).tolist() for v in values])
+    if len(s) == 2:
+        x0, x1 = s
+        a = 1.0 / (x1 - x0)
+        r0, r1 = [], []
+        for p, q in columns:
+            f01 = a * (q - p)
+            r0.append(p - x0 * f01)
+            r1.append(f01)
+        return np.array([r0, r1]) if r0 else np.zeros((2, 0))
+    x0, x1, x2 = s
+    a, b, c = 1.0 / (x1 - x0), 1.0 / (x2 - x1), 1.0 / (x2 - x0)
+    r0, r1, r2 = [], [], []
+    for p, q, r in columns:  # p(s) = p + f01 (s - x0) + f012 (s - x0)(s - x1)
+        f01 = a * (q - p)
+        f012 = c * (b * (r - q) - f01)
+        r0.append(p - x0 * f01 + x0 * x1 * f012)
+        r1.append(f01 - (x0 + x1) * f012)
+        r2.append(2.0 * f012)
+    return np.array([r0, r1, r2]) if r0 else np.zeros((3, 0))
 
 
 def evaluate(rows: np.ndarray, s: float) -> np.ndarray:
@@ -76,8 +99,9 @@ class History:
         self.values: list[dict[str, np.ndarray]] = []
 
     def push(self, t: float, outputs: dict[str, np.ndarray]) -> None:
+        """Keep the arrays themselves: System.refresh_outputs makes a new one per read."""
         self.times.append(t)
-        self.values.append({c: v.copy() for c, v in outputs.items()})
+        self.values.append(dict(outputs))
         if len(self.times) > self.depth:
             del self.times[0], self.values[0]
 
@@ -87,16 +111,34 @@ class History:
         first (interpolation)."""
         if order == 0:  # the common case, kept cheap: hold the newest value
             return (newest[1] if newest is not None else self.values[-1][comp])[None, :]
-        times, values = [], []
+        k = min(order + (newest is None), len(self.times))  # points taken from the history
+        # Newton order: the point at t (the newest in the history) first, then t + h if given
+        times = self.times[-1:-k - 1:-1]
+        values = [v[comp] for v in self.values[-1:-k - 1:-1]]
         if newest is not None:
-            times.append(newest[0])
-            values.append(newest[1])
-        for k in range(len(self.times) - 1, -1, -1):
-            if len(times) > order:
-                break
-            times.append(self.times[k])
-            values.append(self.values[k][comp])
-        return taylor_rows(np.array(times) - t, np.array(values))
+            times.insert(1, newest[0])
+            values.insert(1, newest[1])
+        return taylor_rows([x - t for x in times], values)
+
+
+class Coefficients(dict):
+    """Taylor rows at t of each component's connected outputs, computed when first read (a
+    Gauss-Seidel sweep never reads the first component's extrapolation or the last one's
+    interpolation)."""
+
+    def __init__(self, history: History, t: float, order: int, newest: dict | None = None):
+        super().__init__()
+        self.history, self.t, self.order = history, t, order
+        self.newest = dict(newest) if newest else {}
+
+    def __missing__(self, comp: str) -> np.ndarray:
+        rows = self[comp] = self.history.rows(comp, self.t, self.order, self.newest.get(comp))
+        return rows
+
+    def reached(self, comp: str, t_new: float, values: np.ndarray) -> None:
+        """comp is at t_new with `values`: from now on its rows interpolate through that point."""
+        self.newest[comp] = (t_new, values)
+        self.pop(comp, None)
 
 
 class Master:
@@ -104,6 +146,7 @@ class Master:
     needs_rollback = False
     variable_step = False
     startup_corrector = False  # fixed-step masters: see _corrected_first_step
+    uses_error_scale = False   # True: keep `scale` (each output's largest magnitude) per step
 
     def __init__(self, system, settings):
         self.system = system
@@ -183,42 +226,44 @@ class Master:
         return taken
 
     # -- input polynomials ----------------------------------------------------------------
-    def source_coefficients(self, t: float, order: int, newest: dict | None = None) -> dict:
+    def source_coefficients(self, t: float, order: int, newest: dict | None = None
+                            ) -> Coefficients:
         """Taylor rows at t of every component's connected outputs (extrapolation of `order`
         from the history; a component in `newest` (comp -> (t_new, values)) contributes that
-        point too)."""
-        newest = newest or {}
-        return {c: self.history.rows(c, t, order, newest.get(c)) for c in self.system.order}
+        point too), computed when first read."""
+        return Coefficients(self.history, t, order, newest)
 
     def gather(self, comp: str, coefficients: dict) -> np.ndarray:
         """Taylor rows of comp's inputs, from the rows of their sources."""
         groups = self._groups[comp]
+        if len(groups) == 1:  # one source feeds every input: a column selection
+            src, _, indices = groups[0]
+            return coefficients[src].take(indices, axis=1)
         depth = max((len(coefficients[src]) for src, _, _ in groups), default=1)
         rows = np.zeros((depth, len(self.system.in_names[comp])))
         for src, positions, indices in groups:
             c = coefficients[src]
-            rows[:len(c), positions] = c[:, indices]
+            rows[:len(c), positions] = c.take(indices, axis=1)
         return rows
 
     def advance_component(self, comp: str, t: float, h: float, rows: np.ndarray) -> None:
         """Give comp its inputs as the polynomial `rows` over [t, t + h] and step it."""
         system = self.system
-        system.set_external(comp, t)
+        if system.external_varies[comp]:  # constant external inputs were written at start
+            system.set_external(comp, t)
         write_derivatives = self._derivative_writer[comp]
         if write_derivatives is not None:
             system.write_inputs[comp](rows[0])
-            if len(rows) > 1 or self._derivatives_set[comp]:
-                d1 = rows[1] if len(rows) > 1 else np.zeros(rows.shape[1])
-                d2 = rows[2] if len(rows) > 2 else np.zeros(rows.shape[1])
-                write_derivatives(np.concatenate([d1, d2]))
+            if len(rows) > 1 or self._derivatives_set[comp]:  # zeros once after a held step
+                write_derivatives(rows)
                 self._derivatives_set[comp] = len(rows) > 1
-            self.seen[comp] = (rows[0], evaluate(rows, h) if len(rows) > 1 else rows[0])
+            self.seen[comp] = (rows, h)
         else:
             if len(rows) > 1:
                 self._warn_foreign(comp)
             value = evaluate(rows, 0.5 * h)
             system.write_inputs[comp](value)
-            self.seen[comp] = (value, value)
+            self.seen[comp] = (value[None, :], h)
         system.fmus[comp].do_step(t, h)
 
     def _warn_foreign(self, comp: str) -> None:
@@ -246,8 +291,7 @@ class Master:
         coefficients = self.source_coefficients(t, order)
         for comp in system.order:
             self.advance_component(comp, t, h, self.gather(comp, coefficients))
-            new = system.refresh_outputs(comp)
-            coefficients[comp] = self.history.rows(comp, t, order, (t + h, new))
+            coefficients.reached(comp, t + h, system.refresh_outputs(comp))
 
     # -- rollback -------------------------------------------------------------------------
     def save_states(self) -> dict:
@@ -264,8 +308,9 @@ class Master:
     # -- bookkeeping ----------------------------------------------------------------------
     def _remember(self, t: float) -> None:
         self.history.push(t, self.system.outputs)
-        for c, v in self.system.outputs.items():
-            np.maximum(self.scale[c], np.abs(v), out=self.scale[c])
+        if self.uses_error_scale:
+            for c, v in self.system.outputs.items():
+                np.maximum(self.scale[c], np.abs(v), out=self.scale[c])
 
     def error_scale(self, comp: str, values: np.ndarray) -> np.ndarray:
         """What a tolerance is relative to: the largest magnitude the output has had so far,
@@ -274,8 +319,9 @@ class Master:
 
     def check_finite(self, t: float) -> None:
         for comp, values in self.system.outputs.items():
-            if values.size and not (np.all(np.isfinite(values))
-                                    and np.max(np.abs(values)) < RUNAWAY_LIMIT):
+            # in Python floats (cheaper than numpy for a few values): a NaN makes the sum NaN
+            if not sum(map(abs, values.tolist())) < RUNAWAY_LIMIT and not all(
+                    -RUNAWAY_LIMIT < x < RUNAWAY_LIMIT for x in values.tolist()):
                 k = int(np.argmax(~np.isfinite(values) | (np.abs(values) >= RUNAWAY_LIMIT)))
                 raise DivergenceError(t, comp, self.system.out_names[comp][k], float(values[k]))
 
@@ -301,13 +347,24 @@ def _input_groups(system, comp: str) -> list[tuple[str, np.ndarray, np.ndarray]]
 
 
 def _derivative_writer(system, comp: str):
-    """A writer for comp's companion inputs X_d1..., X_d2... (crankfmu FMUs), else None."""
+    """For comp's companion inputs X_d1..., X_d2... (crankfmu FMUs): a function writing them
+    from Taylor rows (derivatives the rows lack are 0), else None."""
     fmu, names = system.fmus[comp], system.in_names[comp]
     companions = [f"{n}_d1" for n in names] + [f"{n}_d2" for n in names]
     if not names or not all(n in fmu.variables and fmu.variables[n].causality == "input"
                             for n in companions):
         return None
-    return fmu.writer(companions)
+    write = fmu.writer(companions)
+    padded = np.zeros((2, len(names)))  # d1, d2 for rows without a 2nd derivative (d2 = 0)
+    flat = padded.ravel()               # a view: the companions' order is d1..., d2...
+
+    def write_rows(rows: np.ndarray) -> None:
+        if len(rows) == 3:
+            write(rows[1:].ravel())
+        else:
+            padded[0] = rows[1] if len(rows) == 2 else 0.0
+            write(flat)
+    return write_rows
 
 
 def _nominal(fmu, name: str) -> float:

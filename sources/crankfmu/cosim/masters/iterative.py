@@ -31,6 +31,7 @@ CONTRACTION = 0.25  # a Newton iteration must cut the residual by this factor, e
 class Iterative(Master):
     name = "iterative"
     needs_rollback = True
+    uses_error_scale = True
 
     def __init__(self, system, settings):
         super().__init__(system, settings)
@@ -118,7 +119,7 @@ class Iterative(Master):
 
     def _predict(self, t: float, h: float) -> dict:
         coefficients = self.source_coefficients(t, self.extrapolation)
-        return {c: evaluate(rows, h) for c, rows in coefficients.items()}
+        return {c: evaluate(coefficients[c], h) for c in self.system.order}
 
     def _error(self, residual: np.ndarray, g: np.ndarray) -> float:
         if not self.n:

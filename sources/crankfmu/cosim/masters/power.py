@@ -89,5 +89,12 @@ class PortPower:
 
 
 def _ends(seen: dict, comp: str, index: int) -> tuple[float, float]:
-    start, end = seen[comp]
-    return float(start[index]), float(end[index])
+    """An input's value at the step's start and end, from the Taylor rows the FMU saw (only the
+    ports' inputs are evaluated: in the order of masters.base.evaluate, so the same floats)."""
+    rows, h = seen[comp]
+    start = end = float(rows[0, index])
+    if len(rows) > 1:
+        end += float(rows[1, index]) * h
+    if len(rows) > 2:
+        end += float(rows[2, index]) * (0.5 * h * h)
+    return start, end
