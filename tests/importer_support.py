@@ -21,6 +21,23 @@ def require_ecospy() -> None:
                     allow_module_level=True)
 
 
+@pytest.fixture(scope="module")
+def catalog_fmus(tmp_path_factory) -> Path:
+    """Every FMU of the catalog, built once per test module (import it into the module)."""
+    from crankfmu.fmi.build import build_all
+    from crankfmu.physics.catalog import FMU_MODELS
+
+    dest = tmp_path_factory.mktemp("catalog_fmus")
+    build_all(dest, list(FMU_MODELS), check=False)
+    return dest
+
+
+def relative_deviation(a: np.ndarray, b: np.ndarray) -> float:
+    """max |a - b| over the run, relative to max |b| (pointwise relative error is meaningless
+    where a signal crosses zero)."""
+    return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300))
+
+
 def build_catalog(dest: Path) -> dict[str, Path]:
     """Every FMU of the catalog built into `dest` (new models are picked up automatically)."""
     from crankfmu.fmi.build import build_all

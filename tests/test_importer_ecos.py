@@ -13,22 +13,10 @@ from importer_support import require_ecospy
 require_ecospy()
 from crankfmu.interop import ecos  # noqa: E402
 from crankfmu.interop.plan import plan_scene, plan_single_fmu  # noqa: E402
+from importer_support import catalog_fmus, relative_deviation  # noqa: E402,F401
 
 STOP = 0.2  # s: 200 Jacobi steps of 1 ms, through the start-up transient (fast enough to test)
 
-
-@pytest.fixture(scope="module")
-def catalog_fmus(tmp_path_factory):
-    from crankfmu.fmi.build import build_all
-    dest = tmp_path_factory.mktemp("catalog_fmus")
-    build_all(dest, list(FMU_MODELS), check=False)
-    return dest
-
-
-def relative_deviation(a: np.ndarray, b: np.ndarray) -> float:
-    """max |a - b| over the run, relative to max |b| (pointwise relative error is meaningless
-    where a signal crosses zero)."""
-    return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300))
 
 
 @pytest.mark.parametrize("model", list(FMU_MODELS))
