@@ -21,6 +21,9 @@ def require_ecospy() -> None:
                     allow_module_level=True)
 
 
+IMPORTER_STOP = 0.2  # s: 200 Jacobi steps of 1 ms, through the start-up transient
+
+
 @pytest.fixture(scope="module")
 def catalog_fmus(tmp_path_factory) -> Path:
     """Every FMU of the catalog, built once per test module (import it into the module)."""
@@ -30,6 +33,18 @@ def catalog_fmus(tmp_path_factory) -> Path:
     dest = tmp_path_factory.mktemp("catalog_fmus")
     build_all(dest, list(FMU_MODELS), check=False)
     return dest
+
+
+@pytest.fixture(scope="module")
+def jacobi_scene():
+    """The servo press as the peers run it: Jacobi, inputs held over the step, the FMUs' default
+    tolerance (1e-8), stopped after IMPORTER_STOP."""
+    from crankfmu.scenario import load_scene
+    scene = load_scene(Path(__file__).resolve().parents[1] / "scenarios" / "servo_press.toml")
+    scene.stop_time = IMPORTER_STOP
+    scene.master.algorithm, scene.master.extrapolation = "jacobi", 0
+    scene.master.fmu_tolerance = 1e-8
+    return scene
 
 
 def relative_deviation(a: np.ndarray, b: np.ndarray) -> float:

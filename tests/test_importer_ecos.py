@@ -13,10 +13,10 @@ from importer_support import require_ecospy
 require_ecospy()
 from crankfmu.interop import ecos  # noqa: E402
 from crankfmu.interop.plan import plan_scene, plan_single_fmu  # noqa: E402
-from importer_support import catalog_fmus, relative_deviation  # noqa: E402,F401
+from importer_support import (IMPORTER_STOP, catalog_fmus, jacobi_scene,  # noqa: E402,F401
+                              relative_deviation)
 
-STOP = 0.2  # s: 200 Jacobi steps of 1 ms, through the start-up transient (fast enough to test)
-
+STOP = IMPORTER_STOP  # s (importer_support: 200 Jacobi steps of 1 ms)
 
 
 @pytest.mark.parametrize("model", list(FMU_MODELS))
@@ -42,17 +42,6 @@ def test_every_fmu_runs_alone_on_its_start_values(catalog_fmus, model):
         dev = relative_deviation(values, other.column(name))
         assert dev < 1e-9, f"{name}: ecos vs libcosim deviate by {dev:.3g}"
 
-
-@pytest.fixture(scope="module")
-def jacobi_scene():
-    from conftest import SCENARIOS
-    from crankfmu.scenario import load_scene
-    scene = load_scene(SCENARIOS / "servo_press.toml")
-    scene.stop_time = STOP
-    # the peers' algorithm: Jacobi, inputs held over the step, the FMUs' default tolerance
-    scene.master.algorithm, scene.master.extrapolation = "jacobi", 0
-    scene.master.fmu_tolerance = 1e-8
-    return scene
 
 
 def test_servo_press_in_ecos_equals_crankfmu_jacobi(jacobi_scene, fmu_dir, tmp_path):

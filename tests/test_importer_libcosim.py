@@ -12,10 +12,10 @@ from crankfmu.scenario.scene import SceneError
 pytest.importorskip("libcosimpy")
 from crankfmu.interop import libcosim  # noqa: E402
 from crankfmu.interop.plan import plan_scene, plan_single_fmu  # noqa: E402
-from importer_support import catalog_fmus, relative_deviation  # noqa: E402,F401
+from importer_support import (IMPORTER_STOP, catalog_fmus, jacobi_scene,  # noqa: E402,F401
+                              relative_deviation)
 
-STOP = 0.2  # s: 200 Jacobi steps of 1 ms, through the start-up transient (fast enough to test)
-
+STOP = IMPORTER_STOP  # s (importer_support: 200 Jacobi steps of 1 ms)
 
 
 @pytest.mark.parametrize("model", list(FMU_MODELS))
@@ -28,17 +28,6 @@ def test_every_fmu_runs_alone_on_its_start_values(catalog_fmus, model):
     for name, values in result.columns.items():
         assert np.all(np.isfinite(values)), f"{name} not finite in libcosim"
 
-
-@pytest.fixture(scope="module")
-def jacobi_scene():
-    from conftest import SCENARIOS
-    from crankfmu.scenario import load_scene
-    scene = load_scene(SCENARIOS / "servo_press.toml")
-    scene.stop_time = STOP
-    # the peers' algorithm: Jacobi, inputs held over the step, the FMUs' default tolerance
-    scene.master.algorithm, scene.master.extrapolation = "jacobi", 0
-    scene.master.fmu_tolerance = 1e-8
-    return scene
 
 
 @pytest.fixture(scope="module")

@@ -24,11 +24,12 @@ from __future__ import annotations
 
 import bisect
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from .swap import read_scene_table
 
 ALGORITHMS = ("gauss-seidel", "jacobi", "iterative", "adaptive")
 TOP_LEVEL_KEYS = {"scene", "master", "components", "connections", "inputs", "record", "swap",
@@ -258,16 +259,7 @@ def load_scene(path) -> Scene:
     if path.suffix.lower() == ".ssp":  # an SSP archive (crankfmu export-ssp or another tool)
         from ..ssp.load import load_ssp
         return load_ssp(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise SceneError(path, "(file)", "no such scene file") from None
-    except tomllib.TOMLDecodeError as err:
-        raise SceneError(path, "(syntax)", f"not valid TOML: {err}") from None
-    if "swap" in data:
-        from .swap import resolve_swap
-        data = resolve_swap(path, data)
-    return parse_scene(path, data)
+    return parse_scene(path, read_scene_table(path))
 
 
 def apply_overrides(scene: Scene, assignments: list[str]) -> None:

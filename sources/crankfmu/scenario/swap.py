@@ -34,7 +34,9 @@ def _names(ref: str) -> str:
     return ref.split(".", 1)[0]
 
 
-def _read(path: Path, seen: tuple) -> dict:
+def read_scene_table(path: Path, seen: tuple = ()) -> dict:
+    """The scene file's TOML table, with a `[swap]` resolved against its base (recursively;
+    `seen` holds the files on the way, to report a cycle)."""
     if path.resolve() in seen:
         raise _error(path, "[swap].base", "the swap bases form a cycle: "
                      + " -> ".join(str(p) for p in seen + (path.resolve(),)))
@@ -62,7 +64,7 @@ def resolve_swap(path, data: dict, seen: tuple = ()) -> dict:
     if not isinstance(replace, list) or not all(isinstance(r, str) for r in replace):
         raise _error(path, "[swap].replace", "must be a list of component names of the base")
     base_path = (path.parent / swap["base"])
-    base = copy.deepcopy(_read(base_path, seen or (path.resolve(),)))
+    base = copy.deepcopy(read_scene_table(base_path, seen or (path.resolve(),)))
     missing = [r for r in replace if r not in base.get("components", {})]
     if missing:
         raise _error(path, "[swap].replace", f"{missing[0]!r} is not a component of {base_path}; "
