@@ -111,6 +111,14 @@ variables = ["a.out_a", "a.out_b", "a.out_c", "b.out_a", "b.out_b", "b.out_c"]
 
 # -- the no-op FMU, built like the catalog FMUs ------------------------------------------------
 def build_noop(dest: Path) -> Path:
+    return build_script_fmu(dest, NOOP, NOOP_SCRIPT)
+
+
+def build_script_fmu(dest: Path, name: str, template: str, runtime: bool = True,
+                     **fields) -> Path:
+    """An FMU `name` from an entry-script template (formatted with digest, name and `fields`),
+    with crankfmu's runtime bundled (runtime=True) and its modelDescription, or as pythonfmu
+    writes it (runtime=False: a plain pythonfmu slave)."""
     import zipfile
 
     from pythonfmu.builder import FmuBuilder
@@ -122,24 +130,27 @@ def build_noop(dest: Path) -> Path:
     dest.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="crankfmu_bench_") as tmp:
         tmp = Path(tmp)
-        runtime = _write_runtime(tmp, digest)
-        script = tmp / f"crankfmu_{digest}_{NOOP}.py"
-        script.write_text(NOOP_SCRIPT.format(digest=digest, name=NOOP))
+        files = [_write_runtime(tmp, digest)] if runtime else []
+        script = tmp / f"crankfmu_{digest}_{name}.py"
+        script.write_text(template.format(digest=digest, name=name, **fields))
         sys.path.insert(0, str(tmp))
         try:
-            built = FmuBuilder.build_FMU(script, dest=tmp / "out", project_files=[runtime])
-            slave_class = getattr(sys.modules[script.stem], NOOP)
-            target = dest / f"{NOOP}.fmu"
+            built = FmuBuilder.build_FMU(script, dest=tmp / "out", project_files=files)
+            target = dest / f"{name}.fmu"
+            if not runtime:
+                target.write_bytes(built.read_bytes())
+                return target
+            slave_class = getattr(sys.modules[script.stem], name)
             with zipfile.ZipFile(built) as z:
                 entries = {i.filename: z.read(i) for i in z.infolist() if not i.is_dir()}
             entries["modelDescription.xml"] = model_description(slave_class, digest)
             with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as z:
-                for name in sorted(entries):
-                    z.writestr(zipfile.ZipInfo(name, ZIP_DATE), entries[name])
+                for entry in sorted(entries):
+                    z.writestr(zipfile.ZipInfo(entry, ZIP_DATE), entries[entry])
         finally:
             sys.path.remove(str(tmp))
-            for name in [m for m in sys.modules if digest in m]:
-                del sys.modules[name]
+            for module in [m for m in sys.modules if digest in m]:
+                del sys.modules[module]
     return target
 
 

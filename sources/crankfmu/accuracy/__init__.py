@@ -12,12 +12,17 @@ from pathlib import Path
 
 from .metrics import METRICS, Metric, MetricError, make_metric, observed_order, steady_figures
 from .report import format_orders, format_table, plot_work_precision, write_table_csv
-from .sweep import (FLOOR_FACTOR, Outcome, Setting, cheapest, fewest_steps,
+from .sweep import (FLOOR_FACTOR, Outcome, Setting, cheapest, fewest_steps, is_variable_step,
                     load_or_solve_reference, orders, reference_grid, run_one, settings_for)
 
 DEFAULT_STEP_FACTORS = (4.0, 2.0, 1.0, 0.5)          # x the scene's step
 DEFAULT_TOLERANCES = (1e-2, 1e-3, 1e-4)              # a variable-step master's sweep
 DEFAULT_TARGET = 1e-3
+# Left out of the default grid: a variable-step master with extrapolation 0 bounds a held
+# input's error, which is first order in the step, so tight tolerances cost ~1/tol steps
+# (servo press, 1 s, tolerance 1e-4: 150,000 doStep calls and 38 s, against 802 calls with
+# extrapolation 2). Asked for explicitly (--algorithms adaptive --extrapolations 0) it runs.
+DEFAULT_GRID_EXCLUDES = {("variable-step", 0)}
 
 
 @dataclass
@@ -59,6 +64,8 @@ def run_accuracy(scene, options: AccuracyOptions) -> AccuracyResult:
         scene, options.algorithms or list(MASTERS), options.extrapolations,
         options.steps or [f * scene.master.step for f in DEFAULT_STEP_FACTORS],
         options.fmu_tolerances or [scene.master.fmu_tolerance], options.tolerances)
+    if options.algorithms is None:
+        settings = [s for s in settings if not _excluded_by_default(s)]
     out = Path(options.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     ref, ref_csv, cached = load_or_solve_reference(scene, reference_grid(scene, settings), out,
@@ -74,6 +81,11 @@ def run_accuracy(scene, options: AccuracyOptions) -> AccuracyResult:
                           cheapest(outcomes, options.target),
                           fewest_steps(outcomes, options.target), metric, ref_csv, cached, csv,
                           png)
+
+
+def _excluded_by_default(setting: Setting) -> bool:
+    kind = "variable-step" if is_variable_step(setting.algorithm) else setting.algorithm
+    return (kind, setting.extrapolation) in DEFAULT_GRID_EXCLUDES
 
 
 def _bar(items, enabled, label):

@@ -1,13 +1,16 @@
 """Build every FMU into fmus/ with pythonfmu and check each with fmpy validate.
 
-Each FMU bundles the runtime (crankfmu.physics and crankfmu.slaves) as a package named
-`crankfmu_rt_<digest>`, where the digest hashes those sources. All Python FMUs in one process
+Each FMU bundles the runtime as a package named `crankfmu_rt_<digest>`: the adapter
+(crankfmu.slaves) and the physics modules the FMU models import, found by following their
+relative imports (the analyses, which no model imports, stay out), where the digest hashes those
+sources. All Python FMUs in one process
 share one interpreter and one sys.modules: FMUs of the same build share the runtime (same code),
 FMUs of different builds load different packages, so no FMU ever runs another build's code.
 """
 from __future__ import annotations
 
 import argparse
+import ast
 import functools
 import html
 import inspect
@@ -22,7 +25,7 @@ from ..slaves.base import ModelSlave, variable_table
 from .model_description import model_description, sources_digest
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
-RUNTIME_SUBPACKAGES = ("physics", "slaves")
+RUNTIME_ROOTS = ("slaves/base.py",)  # with every FMU model's module (physics.catalog)
 # The runtime imports all its modules at once: a later FMU of the same build finds them in
 # sys.modules even after the FMU that first loaded the package was freed and its files deleted.
 RUNTIME_INIT = '''"""crankfmu runtime bundled in FMUs (build {digest})."""
@@ -57,12 +60,37 @@ class {model_name}(Fmi2Slave):
 ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # fixed timestamps: same sources give the same FMU bytes
 
 
+def _relative_imports(path: Path) -> set[Path]:
+    """The package files a module imports relatively (from . import x, from ..a.b import c)."""
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if not isinstance(node, ast.ImportFrom) or node.level == 0:
+            continue
+        base = path.parent
+        for _ in range(node.level - 1):
+            base = base.parent
+        target = base.joinpath(*node.module.split(".")) if node.module else base
+        candidates = [target.with_suffix(".py")] if node.module else []
+        candidates += [target / f"{alias.name}.py" for alias in node.names]
+        found.update(c for c in candidates if c.is_file())
+    return found
+
+
 def runtime_files() -> list[tuple[str, bytes]]:
-    files = []
-    for sub in RUNTIME_SUBPACKAGES:
-        for path in sorted((PACKAGE_DIR / sub).glob("*.py")):
-            files.append((f"{sub}/{path.name}", path.read_bytes()))
-    return files
+    """(path in the bundle, bytes): the import closure of the adapter and of the FMU models,
+    with the __init__.py of each package it touches."""
+    todo = [PACKAGE_DIR / root for root in RUNTIME_ROOTS]
+    todo += [PACKAGE_DIR / "physics" / f"{entry.split(':')[0]}.py"
+             for entry in FMU_MODELS.values()]
+    seen: set[Path] = set()
+    while todo:
+        path = todo.pop()
+        if path not in seen:
+            seen.add(path)
+            todo.extend(_relative_imports(path))
+    seen.update(path.parent / "__init__.py" for path in list(seen))
+    names = sorted(path.relative_to(PACKAGE_DIR).as_posix() for path in seen)
+    return [(name, (PACKAGE_DIR / name).read_bytes()) for name in names]
 
 
 @functools.lru_cache(maxsize=1)

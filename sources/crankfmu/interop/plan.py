@@ -140,14 +140,13 @@ def _check_parameters(scene: Scene, descs: dict) -> None:
     inside libcosim and ecos the FMU's fatal error in initialization kills the whole process
     (measured: libcosim aborts on an uncaught C++ exception, ecos segfaults)."""
     from ..physics.base import ParameterError
-    from ..physics.catalog import FMU_MODELS, physics_class
+    from ..physics.catalog import FMU_MODELS, make_physics
     for name, comp in scene.components.items():
         model = descs[name].model_description.modelName
         if model not in FMU_MODELS:
             continue
         try:
-            physics_class(model)({k: float(v) for k, v in comp.parameters.items()},
-                                 list(comp.effects))
+            make_physics(model, comp.parameters, comp.effects)
         except ParameterError as err:
             raise SceneError(scene.path, f"[components.{name}].parameters", str(err)) from None
 

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import importlib
 
+from .base import SCIPY_SOLVER, PhysicsModel
+
 FMU_MODELS: dict[str, str] = {
     "DcServoMotor": "dc_motor:DcServoMotor",
     "StephensonPress": "stephenson_press:StephensonPress",
@@ -23,3 +25,13 @@ def physics_class(model_name: str):
     except KeyError:
         raise KeyError(f"no physics model named {model_name!r}; known: {sorted(FMU_MODELS)}")
     return getattr(importlib.import_module(f"{__package__}.{module}"), cls)
+
+
+def make_physics(model_name: str, parameters: dict, effects) -> PhysicsModel:
+    """The physics model behind an FMU, from a scene's parameters and effects: the FMU's solver
+    switch (scipy_solver) selects the model's solver instead of being a physics parameter."""
+    physics = {k: float(v) for k, v in parameters.items() if k != SCIPY_SOLVER}
+    model = physics_class(model_name)(physics, list(effects))
+    if parameters.get(SCIPY_SOLVER):
+        model.solver = "scipy"
+    return model

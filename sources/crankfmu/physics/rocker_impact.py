@@ -23,7 +23,7 @@ torque and inertia).
 
 Linearised stiffnesses (effect hertz_contact off): c = 1.25 K^(2/3) Pm^(1/3) and
 c0 = k_n Tm^(1/3) from the paper's fixed-point iterations on the first-approximation peaks
-(rocker_analysis.linearise, to 0.1 %), at initialization with J_t and the impact speed V0, unless
+(rocker_linear.linearise, to 0.1 %), at initialization with J_t and the impact speed V0, unless
 c_contact / c_support give them. With hertz_contact on, c0 still comes from that iteration.
 
 The geometry is linearised about the strike position (the paper's model: the strike point moves
@@ -35,10 +35,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from .base import Effect, IntegrationError, ParameterError, PhysicsModel, Variable
-from .rocker_analysis import AnalysisError, RockerData, linearise
+from .rocker_linear import AnalysisError, RockerData, linearise
 
 _MO100_S = 1.1 * 0.734 / (35.1 * 0.106)   # 10 % beyond the centre of percussion J/(m r)
 
@@ -385,26 +384,20 @@ class RockerImpact(PhysicsModel):
         """Integrate from t0 to t0 + h with the mode switches as terminal events and the force
         extrema as non-terminal events that do not restart the integrator."""
         if h <= 0.0:
-            return np.asarray(x0, dtype=float)
-        t, x, t_end = t0, np.array(x0, dtype=float), t0 + h
+            return list(x0)
+        t, x, t_end = t0, x0, t0 + h
         for _ in range(self.max_events_per_step):
             switch = self.event_functions(u_of_t)
-            monitors = self.monitor_functions(u_of_t)
-            sol = solve_ivp(lambda s, y: self.derivatives(s, y, u_of_t(s)), (t, t_end), x,
-                            method=self.integrator, rtol=rtol, atol=atol,
-                            events=switch + monitors)
-            if sol.status < 0:
-                raise IntegrationError(f"{self.model_name}: {sol.message} at t = {t:.9g} s")
-            for k in range(1, len(sol.t_events)):
-                for te, ye in zip(sol.t_events[k], sol.y_events[k]):
-                    self.observe(te, ye, u_of_t(te))
+            sol = self.integrate(u_of_t, t, x, t_end, rtol, atol,
+                                 switch + self.monitor_functions(u_of_t))
+            for _, te, xe in sol.crossings:
+                self.observe(te, xe, u_of_t(te))
             if sol.status == 0:
-                x = sol.y[:, -1]
-                self.observe(t_end, x, u_of_t(t_end))
-                return x
-            t, x = float(sol.t_events[0][0]), sol.y_events[0][0]
-            x = self.on_event(t, x, u_of_t(t), 0)
+                self.observe(t_end, sol.x, u_of_t(t_end))
+                return sol.x
+            t = sol.t
+            x = self.on_event(t, sol.x, u_of_t(t), 0)
             if t >= t_end:
-                return x
+                return list(x)
         raise IntegrationError(f"{self.model_name}: more than {self.max_events_per_step} "
                                f"contact changes in one step at t = {t:.9g} s (chattering)")

@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import expm
 
-from .base import ParameterError, PhysicsModel, Variable
+from .base import ParameterError, PhysicsModel, Variable, quadratic_coefficients
 
 
 class LinearModel(PhysicsModel):
@@ -38,11 +38,11 @@ class LinearModel(PhysicsModel):
         return self.matrices()[0]
 
     def advance(self, t0, x0, h, u_of_t, rtol, atol):
-        coeffs = _quadratic_coefficients(u_of_t, t0, h)
+        coeffs = quadratic_coefficients(u_of_t, t0, h)
         if coeffs is None:  # not a quadratic in t: the numerical solver
             return super().advance(t0, x0, h, u_of_t, rtol, atol)
         z = self._transition(h) @ np.concatenate([x0, *coeffs])
-        return z[:len(x0)]
+        return z[:len(x0)].tolist()
 
     def _transition(self, h: float) -> np.ndarray:
         """expm(M h) of the augmented system z = [x, u, u', u''] (u' and u'' are the input's
@@ -59,22 +59,6 @@ class LinearModel(PhysicsModel):
                 cache.clear()
             cache[h] = expm(M * h)
         return cache[h]
-
-
-def _quadratic_coefficients(u_of_t, t0: float, h: float):
-    """(u, u', u'') at t0 if u_of_t is a polynomial of degree <= 2 on [t0, t0 + h], else None
-    (checked at a fourth point, to round-off)."""
-    s = np.array([0.0, 0.5 * h, h])
-    values = np.array([u_of_t(t0 + si) for si in s])
-    a0 = values[0]
-    a2 = 4.0 * (values[2] - 2.0 * values[1] + values[0]) / h ** 2  # second derivative
-    a1 = (values[2] - values[0]) / h - 0.5 * a2 * h
-    check = np.asarray(u_of_t(t0 + 0.25 * h))
-    guess = a0 + a1 * 0.25 * h + 0.5 * a2 * (0.25 * h) ** 2
-    scale = np.max(np.abs(values), axis=0) + 1e-300
-    if np.any(np.abs(check - guess) > 1e-9 * scale):
-        return None
-    return a0, a1, a2
 
 
 class Rotor(LinearModel):

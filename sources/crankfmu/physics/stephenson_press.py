@@ -22,6 +22,7 @@ Motion (eq. 1):  J(phi) phi'' + J'(phi)/2 phi'^2 = i M_D + M_C(phi)
     M_C = (G5 - F5) S' + G2 r cos(phi) [+ 2 m_rod g y_C']  (gravity terms: effect gravity)
 Forging force (effect forging_load): F5 = F_max sin(pi x/forging_angle) for
 x = phi - (pi/2 - forging_angle) (mod 2 pi) in [0, forging_angle], else 0 (the window ends at BDC).
+The window's edges are kinks of M_C: they are events (the integrator stops and restarts there).
 
 Rigid coupling to a driving member that integrates the shaft itself (effect driven_crank; e.g. the
 carrier of PlanetaryClutchDrive, docs/models/planetary_drive.md section 6): the press then has no
@@ -43,6 +44,7 @@ import numpy as np
 from .base import Effect, ParameterError, PhysicsModel, Variable
 
 G_STANDARD = 9.80665  # m/s^2
+EDGE_BAND = 1e-12      # rad per rad of |phi|: an edge this close to the restart was just passed
 
 
 class StephensonPress(PhysicsModel):
@@ -115,26 +117,32 @@ class StephensonPress(PhysicsModel):
                                  "> 0 rad when effect forging_load is on")
 
     # -- kinematics ------------------------------------------------------------------------
+    # Each function takes a scalar or an array phi: scalars go through `math` (the FMU's
+    # derivatives, ~20x cheaper than numpy on one value), arrays through numpy (the analyses).
     def kinematics(self, phi):
         """(S, S', S'', psi, psi', psi'') for scalar or array phi."""
+        xp = _namespace(phi)
         r, l = self.p.r, self.p.l
-        cos_psi = -r * np.cos(phi) / l
-        sin_psi = np.sqrt(1.0 - cos_psi ** 2)
-        psi = np.arctan2(sin_psi, cos_psi)
-        dpsi = -(r / l) * np.sin(phi) / sin_psi
-        ddpsi = -((r / l) * np.cos(phi) + dpsi ** 2 * cos_psi) / sin_psi
-        S = r * np.sin(phi) + l * sin_psi
-        dS = r * np.cos(phi) + l * dpsi * cos_psi
-        ddS = -r * np.sin(phi) - l * dpsi ** 2 * sin_psi + l * ddpsi * cos_psi
+        sin_phi, cos_phi = xp.sin(phi), xp.cos(phi)
+        cos_psi = -r * cos_phi / l
+        sin_psi = xp.sqrt(1.0 - cos_psi * cos_psi)
+        psi = _atan2(xp, sin_psi, cos_psi)
+        dpsi = -(r / l) * sin_phi / sin_psi
+        ddpsi = -((r / l) * cos_phi + dpsi * dpsi * cos_psi) / sin_psi
+        S = r * sin_phi + l * sin_psi
+        dS = r * cos_phi + l * dpsi * cos_psi
+        ddS = -r * sin_phi - l * dpsi * dpsi * sin_psi + l * ddpsi * cos_psi
         return S, dS, ddS, psi, dpsi, ddpsi
 
     def rod_centre_velocity(self, phi):
-        """(C', C'') of a rod's centre of mass, each as (x, y) arrays over phi."""
+        """(C', C'') of a rod's centre of mass, each as (x, y) over phi."""
+        xp = _namespace(phi)
         r, l = self.p.r, self.p.l
         _, _, _, psi, dpsi, ddpsi = self.kinematics(phi)
-        dC = (-0.5 * r * np.sin(phi), r * np.cos(phi) + 0.5 * l * np.cos(psi) * dpsi)
-        ddC = (-0.5 * r * np.cos(phi),
-               -r * np.sin(phi) + 0.5 * l * (ddpsi * np.cos(psi) - dpsi ** 2 * np.sin(psi)))
+        sin_phi, cos_phi, sin_psi, cos_psi = xp.sin(phi), xp.cos(phi), xp.sin(psi), xp.cos(psi)
+        dC = (-0.5 * r * sin_phi, r * cos_phi + 0.5 * l * cos_psi * dpsi)
+        ddC = (-0.5 * r * cos_phi,
+               -r * sin_phi + 0.5 * l * (ddpsi * cos_psi - dpsi * dpsi * sin_psi))
         return dC, ddC
 
     def J_constant(self, J_input: float) -> float:
@@ -142,10 +150,10 @@ class StephensonPress(PhysicsModel):
         p = self.p
         return p.gear_ratio ** 2 * J_input + p.J1 + p.m2 * p.r ** 2
 
-    def reduced_inertia(self, phi, J_input: float):
-        """(J(phi), J'(phi)/2) at the crank."""
+    def reduced_inertia(self, phi, J_input: float, kin=None):
+        """(J(phi), J'(phi)/2) at the crank (kin: kinematics(phi) if already at hand)."""
         p = self.p
-        _, dS, ddS, _, dpsi, ddpsi = self.kinematics(phi)
+        _, dS, ddS, _, dpsi, ddpsi = self.kinematics(phi) if kin is None else kin
         J = self.J_constant(J_input) + p.m5 * dS ** 2
         half_dJ = p.m5 * dS * ddS
         if self.on("rod_inertia"):
@@ -157,20 +165,26 @@ class StephensonPress(PhysicsModel):
 
     def forging_force(self, phi):
         p = self.p
+        scalar = _namespace(phi) is math
         if not self.on("forging_load"):
-            return np.zeros_like(np.asarray(phi, dtype=float))
-        x = np.mod(np.asarray(phi, dtype=float) - (0.5 * math.pi - p.forging_angle), 2 * math.pi)
+            return 0.0 if scalar else np.zeros_like(np.asarray(phi, dtype=float))
+        start = 0.5 * math.pi - p.forging_angle
+        if scalar:
+            x = (phi - start) % (2 * math.pi)
+            return p.F_max * math.sin(math.pi * x / p.forging_angle) \
+                if x <= p.forging_angle else 0.0
+        x = np.mod(np.asarray(phi, dtype=float) - start, 2 * math.pi)
         inside = x <= p.forging_angle
         return np.where(inside, p.F_max * np.sin(math.pi * np.minimum(x, p.forging_angle)
                                                  / p.forging_angle), 0.0)
 
-    def resistance_moment(self, phi):
+    def resistance_moment(self, phi, kin=None):
         """M_C(phi) at the crank: forging force and weights (their generalized forces)."""
         p = self.p
-        _, dS, _, _, _, _ = self.kinematics(phi)
+        dS = (self.kinematics(phi) if kin is None else kin)[1]
         M = -self.forging_force(phi) * dS
         if self.on("gravity"):
-            M = M + p.m5 * p.g * dS + p.m2 * p.g * p.r * np.cos(phi)
+            M = M + p.m5 * p.g * dS + p.m2 * p.g * p.r * _namespace(phi).cos(phi)
             if self.on("rod_inertia"):
                 (_, dCy), _ = self.rod_centre_velocity(phi)
                 M = M + 2.0 * p.m_rod * p.g * dCy
@@ -182,8 +196,8 @@ class StephensonPress(PhysicsModel):
 
     def initial_state(self, u):
         if self.on("driven_crank"):
-            return np.zeros(0)
-        return np.array([self.p.phi_start, self.p.w_start])
+            return []
+        return [self.p.phi_start, self.p.w_start]
 
     def crank_motion(self, x, u) -> tuple[float, float]:
         """(phi, phi'): the states, or with driven_crank the driver's shaft over the gear."""
@@ -200,17 +214,54 @@ class StephensonPress(PhysicsModel):
 
     def derivatives(self, t, x, u):
         if self.on("driven_crank"):
-            return np.zeros(0)
+            return ()
         phi, w = x
-        J, half_dJ = self.reduced_inertia(phi, u[1])
-        dw = (self.p.gear_ratio * u[0] + self.resistance_moment(phi) - half_dJ * w * w) / J
-        return np.array([w, dw])
+        kin = self.kinematics(phi)
+        J, half_dJ = self.reduced_inertia(phi, u[1], kin)
+        dw = (self.p.gear_ratio * u[0] + self.resistance_moment(phi, kin) - half_dJ * w * w) / J
+        return (w, dw)
+
+    def event_functions(self, u_of_t):
+        """The forging window's edges (phi = start and start + forging_angle, mod 2 pi), where
+        M_C has a kink: the integrator stops there and restarts, instead of stepping across.
+        Two events: the next edge ahead of the restart angle (crossed upwards) and the last one
+        behind it (crossed downwards, if the crank turns back); an edge within EDGE_BAND of the
+        restart angle is the one just passed and does not count."""
+        if not self.on("forging_load") or self.on("driven_crank"):
+            return []
+        start = 0.5 * math.pi - self.p.forging_angle
+        phi = self.restart_state[0]
+        band = EDGE_BAND * max(1.0, abs(phi))
+        edges = [e + 2 * math.pi * k for k in (math.floor((phi - start) / (2 * math.pi)) + j
+                                              for j in (-1, 0, 1))
+                 for e in (start, start + self.p.forging_angle)]
+        ahead = min(e for e in edges if e > phi + band)
+        behind = max(e for e in edges if e < phi - band)
+        return [_crossing(ahead, +1), _crossing(behind, -1)]
 
     def output_values(self, t, x, u):
         phi, w = self.crank_motion(x, u)
         i = self.p.gear_ratio
-        S, dS = self.kinematics(phi)[:2]
-        J, _ = self.reduced_inertia(phi, u[1])
-        shaft_tau, shaft_J = self.shaft_load(phi, w, u[1])
-        return np.array([i * w, i * phi, phi, w, S, dS * w, self.forging_force(phi), J,
-                         self.resistance_moment(phi), shaft_tau, shaft_J], dtype=float)
+        kin = self.kinematics(phi)
+        S, dS = kin[:2]
+        J, half_dJ = self.reduced_inertia(phi, u[1], kin)
+        M_C = self.resistance_moment(phi, kin)
+        return [i * w, i * phi, phi, w, S, dS * w, self.forging_force(phi), J, M_C,
+                (M_C - half_dJ * w * w) / i, J / (i * i)]
+
+
+def _crossing(angle: float, direction: int):
+    """A terminal event where phi crosses `angle` in `direction`."""
+    def g(t, x):
+        return x[0] - angle
+    g.terminal, g.direction = True, direction
+    return g
+
+
+def _namespace(phi):
+    """math for a scalar angle (float, numpy scalar), numpy for arrays."""
+    return math if isinstance(phi, (float, int)) else np
+
+
+def _atan2(xp, y, x):
+    return math.atan2(y, x) if xp is math else np.arctan2(y, x)

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..physics.base import PhysicsModel
-from ..physics.catalog import FMU_MODELS, physics_class
+from ..physics.catalog import FMU_MODELS, make_physics, physics_class
 from ..scenario.scene import Scene, SceneError
 
 
@@ -67,10 +67,9 @@ def make_model(scene: Scene, name: str) -> PhysicsModel:
         raise CompositionError(f"{scene.path}: {key}.fmu = {comp.fmu!r}: the reference composes "
                                f"catalog physics models only ({', '.join(FMU_MODELS)}), not FMU "
                                "files")
-    cls = physics_class(comp.fmu)
-    _check_composable(cls, name)
+    _check_composable(physics_class(comp.fmu), name)
     try:
-        return cls({k: float(v) for k, v in comp.parameters.items()}, list(comp.effects))
+        return make_physics(comp.fmu, comp.parameters, comp.effects)
     except KeyError as err:
         raise SceneError(scene.path, f"{key}.parameters/effects", str(err.args[0])) from None
     except ValueError as err:  # ParameterError
@@ -286,6 +285,7 @@ class ComposedModel(PhysicsModel):
         for k, part in enumerate(self.parts):
             def u_k(t, k=k):
                 return self.inputs_at(t, current["x"])[k]
+            part.model.restart_state = list(self.restart_state)[part.states]
             for j, g in enumerate(part.model.event_functions(u_k)):
                 events.append(self._wrap_event(g, part.states, current))
                 self._event_owner.append((k, j))

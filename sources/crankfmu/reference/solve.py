@@ -95,9 +95,10 @@ def solve_reference(scene: Scene, rtol: float = DEFAULT_RTOL, times=None,
     recorder = Recorder(list(scene.record), rec_map.units)
     atol = rtol * model.state_nominal()
     x = model.initial_state(t0=scene.start_time)
+    model.solver = "scipy"  # the reference is scipy's solve_ivp, independent of the FMU runtime
     model.integrator = method or model.choose_integrator(scene.start_time, x)
     t = scene.start_time
-    no_input = np.zeros(0)
+    no_input = []
     stops = sorted(set(times.tolist()) | set(input_breakpoints(scene)))
     recorded = set(times.tolist())
     wall = time.perf_counter()

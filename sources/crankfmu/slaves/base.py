@@ -11,20 +11,25 @@ docs/architecture.md "Input extrapolation inside a step"): the first and second 
 each input at the current time. do_step integrates with the input polynomial
 u(t0 + s) = u + u_d1 s + u_d2 s^2/2 and leaves the input at its value at the step's end (outputs
 at t0 + h then see the input at t0 + h). They start at 0, so a host that ignores them gets a held
-input. They come last so that adding them left every other value reference unchanged.
+input. They come after the outputs so that adding them left every other value reference
+unchanged; the solver switch `scipy_solver` comes last for the same reason.
+
+Cost: a get/set/doStep here should cost little more than pythonfmu's own call, so the adapter
+works on a flat list of Python values (no numpy for a handful of numbers), computes the outputs
+once per step (eagerly at the end of doStep, where it also checks them; again only if an input
+is set before they are read) and resolves everything by index.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
 
-import numpy as np
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
 from pythonfmu.enums import Fmi2Status
 from pythonfmu.default_experiment import DefaultExperiment
 
-from ..physics.base import (InputFunction, IntegrationError, ParameterError, PhysicsModel,
-                            held)
+from ..physics.base import (SCIPY_SOLVER, InputPolynomial, IntegrationError, ParameterError,
+                            PhysicsModel)
 
 DEFAULT_TOLERANCE = 1e-8  # relative tolerance of the internal solver when the host gives none
 
@@ -61,6 +66,9 @@ def variable_table(physics_class: type[PhysicsModel]) -> list[FmiVariable]:
                           f"d{k}/dt{k} of {v.name} at the current time (crankfmu input "
                           f"extrapolation; 0 = input held over the step)", 0.0)
               for k in (1, 2) for v in physics_class.inputs]
+    table.append(FmiVariable(SCIPY_SOLVER, "Boolean", "parameter", "fixed", "exact", None,
+                             "Integrate with scipy's solve_ivp instead of the built-in "
+                             "Dormand-Prince 5(4) / closed forms (slower; a cross-check)", False))
     return table
 
 
@@ -70,12 +78,6 @@ def derivative_unit(unit: str | None, order: int) -> str:
     if unit.endswith("/s"):
         return f"{unit}{order + 1}"
     return f"{unit}/s" if order == 1 else f"{unit}/s{order}"
-
-
-def input_polynomial(t0: float, u: np.ndarray, d1: np.ndarray, d2: np.ndarray) -> InputFunction:
-    """u(t) = u + d1 (t - t0) + d2 (t - t0)^2 / 2: the input as the master extrapolates it."""
-    u, d1, half_d2 = np.array(u, dtype=float), np.array(d1, dtype=float), 0.5 * np.array(d2)
-    return lambda t: u + (t - t0) * (d1 + (t - t0) * half_d2)
 
 
 class ModelSlave(Fmi2Slave):
@@ -96,17 +98,21 @@ class ModelSlave(Fmi2Slave):
         self._table = variable_table(cls)
         self._values = [v.start if v.start is not None else 0.0 for v in self._table]
         n_par, n_eff, n_in = len(cls.parameters), len(cls.effects), len(cls.inputs)
-        self._input_slice = slice(n_par + n_eff, n_par + n_eff + n_in)
         n_out = len(cls.outputs)
-        self._output_slice = slice(n_par + n_eff + n_in, n_par + n_eff + n_in + n_out)
+        self._input_slice = slice(n_par + n_eff, n_par + n_eff + n_in)
+        self._output_slice = slice(self._input_slice.stop, self._input_slice.stop + n_out)
         self._d1_slice = slice(self._output_slice.stop, self._output_slice.stop + n_in)
         self._d2_slice = slice(self._d1_slice.stop, self._d1_slice.stop + n_in)
+        self._output_names = [v.name for v in cls.outputs]
+        self._real_vrs = frozenset(vr for vr, v in enumerate(self._table) if v.kind == "Real")
+        self._scipy_vr = len(self._table) - 1  # the solver switch comes last
         for vr, var in enumerate(self._table):
             self._register(vr, var)
         self._model: PhysicsModel | None = None
-        self._x = np.zeros(0)
+        self._x: list = []
         self._time = 0.0
         self._rtol = DEFAULT_TOLERANCE
+        self._atol: list = []
         self._outputs_stale = True
 
     def _register(self, vr: int, var: FmiVariable) -> None:
@@ -130,9 +136,16 @@ class ModelSlave(Fmi2Slave):
         self._outputs_stale = True
 
     def get_real(self, vrs):
-        return [float(self._read(vr)) for vr in vrs]
+        if self._outputs_stale:
+            self._refresh_outputs()
+        values, reals = self._values, self._real_vrs
+        if not reals.issuperset(vrs):
+            raise TypeError(f"value references {sorted(set(vrs) - reals)} are not Real")
+        return [values[vr] for vr in vrs]
 
     def set_real(self, vrs, values):
+        if not self._real_vrs.issuperset(vrs):
+            raise TypeError(f"value references {sorted(set(vrs) - self._real_vrs)} are not Real")
         self._write(vrs, [float(v) for v in values])
 
     def get_boolean(self, vrs):
@@ -141,15 +154,18 @@ class ModelSlave(Fmi2Slave):
     def set_boolean(self, vrs, values):
         self._write(vrs, [bool(v) for v in values])
 
-    def _inputs(self) -> np.ndarray:
-        return np.array(self._values[self._input_slice], dtype=float)
+    def _inputs(self) -> list:
+        return self._values[self._input_slice]
 
     def _build_model(self) -> PhysicsModel:
         cls = self.physics_class
         params = {v.name: self._values[i] for i, v in enumerate(cls.parameters)}
         offset = len(cls.parameters)
         effects = [e.name for k, e in enumerate(cls.effects) if self._values[offset + k]]
-        return cls(params, effects)
+        model = cls(params, effects)
+        if self._values[self._scipy_vr]:
+            model.solver = "scipy"
+        return model
 
     def _refresh_outputs(self) -> None:
         if self._model is None:  # initialization mode: outputs from the current parameters
@@ -160,6 +176,10 @@ class ModelSlave(Fmi2Slave):
         y = model.output_values(self._time, x, self._inputs())
         self._values[self._output_slice] = [float(v) for v in y]
         self._outputs_stale = False
+
+    def _bad_outputs(self) -> list[str]:
+        return [name for name, v in zip(self._output_names, self._values[self._output_slice])
+                if not math.isfinite(v)]
 
     # -- FMI life cycle --------------------------------------------------------------------
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
@@ -173,49 +193,64 @@ class ModelSlave(Fmi2Slave):
         except (ParameterError, KeyError) as err:
             self.log(f"{self.instance_name}: {err}", Fmi2Status.error)
             raise
-        self._x = self._model.initial_state(self._inputs())
-        self._outputs_stale = True
+        self._x = list(self._model.initial_state(self._inputs()))
+        self._atol = [self._rtol * v for v in self._model.state_nominal()]
+        self._refresh_outputs()
+        bad = self._bad_outputs()
+        if bad:
+            message = f"{self.instance_name}: output {', '.join(bad)} not finite at the start"
+            self.log(message, Fmi2Status.error)
+            raise IntegrationError(message)
 
     def do_step(self, current_time, step_size):
+        values = self._values
+        d1, d2 = values[self._d1_slice], values[self._d2_slice]
+        moving = any(d1) or any(d2)
+        u_of_t = InputPolynomial(current_time, values[self._input_slice], d1, d2)
         model = self._model
-        u0 = self._inputs()
-        d1 = np.array(self._values[self._d1_slice], dtype=float)
-        d2 = np.array(self._values[self._d2_slice], dtype=float)
-        moving = bool(np.any(d1) or np.any(d2))
-        u_of_t = input_polynomial(current_time, u0, d1, d2) if moving else held(u0)
-        atol = self._rtol * model.state_nominal()
         try:
-            x = model.advance(current_time, self._x, step_size, u_of_t, self._rtol, atol)
-        except (IntegrationError, FloatingPointError, ValueError) as err:
+            x = model.advance(current_time, self._x, step_size, u_of_t, self._rtol, self._atol)
+        except (IntegrationError, FloatingPointError, ValueError, ZeroDivisionError,
+                OverflowError) as err:
             self.log(f"{self.instance_name}: step at t = {current_time:.9g} s failed: {err}",
                      Fmi2Status.error)
             return False
-        if not np.all(np.isfinite(x)):
+        t_end = current_time + step_size
+        if not all(map(math.isfinite, x)):
             bad = [n for n, v in zip(model.state_names(), x) if not math.isfinite(v)]
             self.log(f"{self.instance_name}: state {', '.join(bad)} not finite at "
-                     f"t = {current_time + step_size:.9g} s", Fmi2Status.error)
+                     f"t = {t_end:.9g} s", Fmi2Status.error)
             return False
         self._x = x
-        self._time = current_time + step_size
+        self._time = t_end
         if moving:  # the input (and its slope) now stand at the step's end
-            self._values[self._input_slice] = [float(v) for v in u_of_t(self._time)]
-            self._values[self._d1_slice] = [float(v) for v in d1 + step_size * d2]
-        self._outputs_stale = True
+            values[self._input_slice] = u_of_t(t_end)
+            values[self._d1_slice] = [a + step_size * b for a, b in zip(d1, d2)]
+        self._refresh_outputs()
+        bad = self._bad_outputs()
+        if bad:
+            self.log(f"{self.instance_name}: output {', '.join(bad)} not finite at "
+                     f"t = {t_end:.9g} s", Fmi2Status.error)
+            return False
         return True
 
-    # -- state save / restore (internal states and modes too) -----------------------------
+    # -- state save / restore (internal states, modes and the step size too) --------------
     def _get_fmu_state(self):
-        discrete = self._model.discrete_state() if self._model is not None else {}
+        model = self._model
         return {"time": self._time, "x": [float(v) for v in self._x],
-                "values": list(self._values), "discrete": discrete,
-                "initialized": self._model is not None}
+                "values": list(self._values),
+                "discrete": model.discrete_state() if model is not None else {},
+                "solver": model.solver_state() if model is not None else {},
+                "initialized": model is not None}
 
     def _set_fmu_state(self, state):
         self._values = list(state["values"])
         self._time = float(state["time"])
-        self._x = np.array(state["x"], dtype=float)
+        self._x = list(state["x"])
         if state["initialized"] and self._model is None:
             self._model = self._build_model()
+            self._atol = [self._rtol * v for v in self._model.state_nominal()]
         if self._model is not None:
             self._model.set_discrete_state(state["discrete"])
+            self._model.set_solver_state(state["solver"])
         self._outputs_stale = True
