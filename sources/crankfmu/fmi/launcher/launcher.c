@@ -134,7 +134,7 @@ typedef struct {
     fmi2Component c;               /* pythonfmu's component */
     fmi2CallbackFunctions host;    /* the host's callbacks */
     fmi2CallbackFunctions mine;    /* given to pythonfmu: our logger, environment = this record */
-    int logging_on, failed, in_exit_init;
+    int logging_on, failed;
     size_t n_categories;
     char **categories;
     char *name, *guid, *resources;
@@ -167,7 +167,9 @@ static void relay_logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Stat
                          fmi2String category, fmi2String message, ...) {
     Instance *inst = (Instance *)env;
     if (!inst || !message) return;
-    if (inst->in_exit_init && status == fmi2Fatal) status = fmi2Error; /* see fmi2Exit... */
+    /* pythonfmu logs every Python exception as fmi2Fatal; the launcher returns fmi2Error for
+     * it (see outcome()), and the message says the same */
+    if (status == fmi2Fatal) status = fmi2Error;
     int wanted = status >= fmi2Error;
     if (!wanted && inst->logging_on) {
         wanted = inst->n_categories == 0;
@@ -554,15 +556,14 @@ EXPORT fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tol_defined, 
 EXPORT fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
     FORWARD(fmi2EnterInitializationMode, Plain);
 }
-/* An impossible parameter raises in the slave's exit_initialization_mode: pythonfmu logs the
- * reason and returns fmi2Fatal; the host gets fmi2Error (messages of this call too). */
+/* An impossible parameter raises in the slave's exit_initialization_mode (or already in a
+ * fmi2GetReal of an output in initialization mode): pythonfmu logs the reason and returns
+ * fmi2Fatal; the host gets fmi2Error. */
 EXPORT fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     Instance *inst = (Instance *)c;
     if (!inst) return fmi2Error;
     REFUSE_IF_FAILED(inst, "fmi2ExitInitializationMode")
-    inst->in_exit_init = 1;
     fmi2Status status = ((Plain)real_fmi2ExitInitializationMode)(inst->c);
-    inst->in_exit_init = 0;
     if (status == fmi2Fatal)
         host_log(&inst->host, inst->name, fmi2Error, "fmi2ExitInitializationMode failed (reason "
                  "above); reported as fmi2Error: free the instance with fmi2FreeInstance or "
