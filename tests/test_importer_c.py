@@ -251,3 +251,13 @@ def test_bare_host_without_scipy_fails_at_instantiate_naming_scipy(bare_host, ca
     message = next(line for line in stderr.splitlines() if "fmi2Instantiate:" in line)
     assert "No module named 'scipy'" in message and str(no_scipy_env) in message
     assert "CRANKFMU_PYTHON" in message  # how to point the FMU at another environment
+
+
+def test_bare_host_with_no_python_there_fails_at_instantiate_saying_so(bare_host, catalog,
+                                                                      tmp_path):
+    config = [fmu_line("m", catalog["DcServoMotor"], tmp_path), "steps 1"]
+    nowhere = tmp_path / "no-such-python"
+    env = {**BARE_ENV, "CRANKFMU_PYTHON": str(nowhere)}
+    _, _, stderr = run_host(bare_host, config, tmp_path, env=env, returncode=2)
+    message = next(line for line in stderr.splitlines() if "fmi2Instantiate:" in line)
+    assert f"CRANKFMU_PYTHON gives {nowhere}: no python executable there" in message, message

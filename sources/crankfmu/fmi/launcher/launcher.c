@@ -480,6 +480,11 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String 
                                      fmi2Boolean visible, fmi2Boolean logging_on) {
     char dir[TEXT], error[8 * TEXT];
     Config cfg;
+    if (!cb || !cb->logger) {
+        fprintf(stderr, "%s: fmi2Instantiate: no callback functions (FMI 2.0 requires a logger)\n",
+                name ? name : "?");
+        return NULL;
+    }
     uri_to_path(resources, dir, sizeof dir);
     pthread_mutex_lock(&lock);
     int ok = read_config(dir, &cfg, error, sizeof error) &&
