@@ -130,24 +130,44 @@ def run_ecos_cli(exe, path, stop: float, cwd, *extra: str) -> dict[str, np.ndarr
     return columns
 
 
-@pytest.mark.parametrize("model", list(FMU_MODELS))
-def test_every_fmu_runs_in_the_native_ecos_cli_as_in_fmpy(catalog_fmus, ecos_cli, model,
-                                                          tmp_path):
+def _unconnected_ssp(fmus: dict, path):
+    """An SSP 1.0 archive holding the FMUs side by side: no connections, no parameters."""
+    import zipfile
+    components = "".join(
+        f'<ssd:Component name="{name}" type="application/x-fmu-sharedlibrary" '
+        f'source="resources/{name}.fmu"/>' for name in fmus)
+    ssd = ('<?xml version="1.0" encoding="UTF-8"?>'
+           '<ssd:SystemStructureDescription xmlns:ssd="http://ssp-standard.org/SSP1/'
+           'SystemStructureDescription" version="1.0" name="catalog"><ssd:System name="catalog">'
+           f'<ssd:Elements>{components}</ssd:Elements></ssd:System>'
+           '</ssd:SystemStructureDescription>')
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr("SystemStructure.ssd", ssd)
+        for name, fmu in fmus.items():
+            z.write(fmu, f"resources/{name}.fmu")
+    return path
+
+
+def test_every_fmu_runs_in_the_native_ecos_cli_as_in_fmpy(catalog_fmus, ecos_cli, tmp_path):
+    """All catalog FMUs, unconnected, in one native ecos run (one Python start): each on its
+    start values, compared with fmpy stepping the same FMU alone in this process."""
     from crankfmu.cosim.fmu import FmuInstance  # noqa: F401 (the exit-order fix in this process)
     from importer_support import step_in_process
-    path = catalog_fmus / f"{model}.fmu"
-    got = run_ecos_cli(ecos_cli, path, NATIVE_STOP, tmp_path)
-    names, ref = step_in_process(path, 1e-3, round(NATIVE_STOP / 1e-3), 1e-8, name=model)
-    ref = ref[:len(got["time"])]  # ecos writes no row at the stop time (t = 0 .. 0.049 s)
-    np.testing.assert_allclose(got["time"], ref[:, 0], rtol=0, atol=1e-12)
-    worst = 0.0
-    for k, name in enumerate(names):
-        column = got[f"instance.{name}"]
-        worst = max(worst, float(np.max(np.abs(column - ref[:, k + 1]))))
-        np.testing.assert_allclose(column, ref[:, k + 1], rtol=1e-15, atol=CSV_HALF_DIGIT,
-                                   err_msg=f"{model}.{name}")
-    print(f"\n{model}: native ecos vs fmpy, {len(names)} outputs x {len(ref)} rows: max |diff| "
-          f"= {worst:.3g} (CSV printed with 6 decimals)")
+    fmus = {model: catalog_fmus / f"{model}.fmu" for model in FMU_MODELS}
+    got = run_ecos_cli(ecos_cli, _unconnected_ssp(fmus, tmp_path / "catalog.ssp"), NATIVE_STOP,
+                       tmp_path)
+    for model, path in fmus.items():
+        names, ref = step_in_process(path, 1e-3, round(NATIVE_STOP / 1e-3), 1e-8, name=model)
+        ref = ref[:len(got["time"])]  # ecos writes no row at the stop time (t = 0 .. 0.049 s)
+        np.testing.assert_allclose(got["time"], ref[:, 0], rtol=0, atol=1e-12)
+        worst = 0.0
+        for k, name in enumerate(names):
+            column = got[f"{model}.{name}"]
+            worst = max(worst, float(np.max(np.abs(column - ref[:, k + 1]))))
+            np.testing.assert_allclose(column, ref[:, k + 1], rtol=1e-15, atol=CSV_HALF_DIGIT,
+                                       err_msg=f"{model}.{name}")
+        print(f"\n{model}: native ecos vs fmpy, {len(names)} outputs x {len(ref)} rows: max "
+              f"|diff| = {worst:.3g} (CSV printed with 6 decimals)", end="")
 
 
 def test_servo_press_ssp_in_the_native_ecos_cli_equals_crankfmu_jacobi(jacobi_scene, fmu_dir,

@@ -34,9 +34,9 @@ FLAGS = ["-O2", "-shared", "-fPIC", "-fvisibility=hidden", "-s", "-Wall", "-Wext
 _WARNED: list[bool] = []  # the warning once per process
 TESTED_HOSTS = (
     "fmpy (simulate_fmu and crankfmu's runner), libcosim (libcosimpy), ecos (ecospy and the "
-    "native `ecos` command-line simulator shipped in the ecospy wheel), and plain C hosts "
-    "(tests/c_host/host.c, which owns a Python interpreter, and tests/c_host/bare_host.c, "
-    "which does not link libpython)")
+    "native `ecos` command-line simulator shipped in the ecospy wheel, run from an empty "
+    "environment), and a plain C host (crankfmu's tests/c_host/host.c) built two ways: "
+    "without libpython (dlopen and fmi2 calls only) and owning a Python interpreter")
 
 
 def find_compiler() -> list[str] | None:
