@@ -23,3 +23,26 @@ def servo_scene():
     from crankfmu.scenario import load_scene
 
     return load_scene(SCENARIOS / "servo_press.toml")
+
+
+@pytest.fixture(scope="session")
+def no_scipy_env(tmp_path_factory) -> Path:
+    """A venv of this Python without scipy: every other package of this environment linked in
+    (numpy, fmpy and their dependencies), scipy left out."""
+    import subprocess
+    import sys
+    import sysconfig
+
+    env = tmp_path_factory.mktemp("no_scipy") / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(env)], check=True)
+    site = Path(sysconfig.get_paths()["purelib"])
+    target = Path(sysconfig.get_paths(vars={"base": str(env), "platbase": str(env)})["purelib"])
+    for entry in site.iterdir():
+        name = entry.name
+        if name.startswith(("scipy", "__editable__", "crankfmu")) or name.endswith(".pth"):
+            continue
+        (target / name).symlink_to(entry)
+    done = subprocess.run([str(env / "bin" / "python"), "-c", "import numpy, scipy"],
+                          capture_output=True, text=True)
+    assert "No module named 'scipy'" in done.stderr, done.stderr  # numpy is there, scipy not
+    return env

@@ -1,11 +1,17 @@
-"""The FMUs in a plain C host (tests/c_host/host.c), compiled here with gcc against libpython.
+"""The FMUs in a plain C host (tests/c_host/host.c), compiled here with gcc two ways.
 
-The host owns the Python interpreter (DESIGN.md, "Hosts"): it starts Python before it dlopens an
-FMU, pointed at this test's Python environment, so pythonfmu's binary finds an interpreter
-running and imports numpy/scipy from the same site-packages as the test. Checks:
+`host` (-DHOST_OWNS_PYTHON, linked with libpython) owns the Python interpreter: it starts Python
+before it dlopens an FMU, pointed at this test's Python environment; the FMU's launcher finds the
+interpreter running and uses it. `bare_host` does not link libpython and knows nothing of Python
+(dlopen and fmi2 calls only, run with `env -i`): the launcher loads libpython and starts Python in
+the environment recorded at build time (this test's). Checks:
 - every catalog FMU, alone with its start values, gives bit-for-bit the outputs fmpy gives when
-  stepping the same FMU in this process (same code, same libraries, same floating-point ops);
-- the servo press scene wired by the host (Jacobi, 1 ms) agrees with crankfmu's Jacobi master.
+  stepping the same FMU in this process (same code, same libraries, same floating-point ops), in
+  both hosts;
+- the servo press scene wired by the host (Jacobi, 1 ms) agrees with crankfmu's Jacobi master;
+- in the bare host, impossible parameters end fmi2ExitInitializationMode with fmi2Error, the
+  reason logged, and the instance is freed; an environment without scipy fails at
+  fmi2Instantiate with a message naming scipy.
 """
 from __future__ import annotations
 
@@ -56,8 +62,8 @@ def host(tmp_path_factory) -> Path:
     if not (Path(include) / "Python.h").exists():
         pytest.skip(f"Python.h not in {include}: install this Python's development headers")
     exe = tmp_path_factory.mktemp("c_host") / "host"
-    cmd = [gcc, "-O2", "-Wall", "-Wextra", "-Werror", "-o", str(exe), str(HOST_SOURCE),
-           f"-I{include}", *libpython_flags(), "-ldl", "-lm"]
+    cmd = [gcc, "-O2", "-Wall", "-Wextra", "-Werror", "-DHOST_OWNS_PYTHON", "-o", str(exe),
+           str(HOST_SOURCE), f"-I{include}", *libpython_flags(), "-ldl", "-lm"]
     done = subprocess.run(cmd, capture_output=True, text=True)
     assert done.returncode == 0, f"{' '.join(cmd)}\n{done.stderr}"
     return exe
@@ -74,18 +80,35 @@ def fmu_line(name: str, fmu: Path, unzip_root: Path) -> str:
     return f"fmu {name} {unzip} {md.coSimulation.modelIdentifier} {md.guid}"
 
 
-def run_host(host: Path, config: list[str], tmp: Path) -> tuple[list[str], np.ndarray, str]:
-    """Run the host on a config (lines); returns (column names, rows, stderr)."""
+def run_host(host: Path, config: list[str], tmp: Path, env: dict | None = None,
+             returncode: int = 0) -> tuple[list[str], np.ndarray, str]:
+    """Run the host on a config (lines); returns (column names, rows, stderr). `env` replaces
+    the environment (default: this one without PYTHON* variables)."""
     path = tmp / "host.cfg"
     # The venv's python as program name: Python reads its pyvenv.cfg and adds its site-packages.
     path.write_text("\n".join([f"python {sys.executable}", *config]) + "\n")
-    env = {k: v for k, v in os.environ.items() if not k.startswith("PYTHON")}
+    if env is None:
+        env = {k: v for k, v in os.environ.items() if not k.startswith("PYTHON")}
     done = subprocess.run([str(host), str(path)], capture_output=True, text=True, env=env,
                           timeout=120)
-    assert done.returncode == 0, f"host failed ({done.returncode}):\n{done.stderr[-3000:]}"
+    assert done.returncode == returncode, f"host exit {done.returncode}:\n{done.stderr[-3000:]}"
+    if returncode:
+        return [], np.empty((0, 0)), done.stderr
     header, *lines = done.stdout.splitlines()
     rows = np.array([[float(v) for v in line.split(",")] for line in lines])
     return header.split(",")[1:], rows, done.stderr
+
+
+_FMPY_RUNS: dict = {}
+
+
+def fmpy_reference(fmu: Path, h: float, rtol: float, model: str):
+    """fmpy's run of one FMU alone (step_in_process, N_STEPS steps), computed once per module
+    for both C hosts."""
+    key = (str(fmu), h, rtol)
+    if key not in _FMPY_RUNS:
+        _FMPY_RUNS[key] = step_in_process(fmu, h, N_STEPS, rtol, name=model)
+    return _FMPY_RUNS[key]
 
 
 def test_host_embeds_this_python_environment(host, catalog, tmp_path):
@@ -108,7 +131,7 @@ def test_every_fmu_alone_in_the_c_host_matches_fmpy_bit_for_bit(model, host, cat
     wall = time.perf_counter()
     names, rows, _ = run_host(host, config, tmp_path)
     wall = time.perf_counter() - wall
-    ref_names, ref = step_in_process(fmu, h, N_STEPS, rtol, name=model)
+    ref_names, ref = fmpy_reference(fmu, h, rtol, model)
     print(f"\n{model}: C host {N_STEPS} steps of {h:g} s in {wall:.2f} s wall (process incl. "
           f"Python start), {len(names)} outputs, max |C - fmpy| = {np.max(np.abs(rows - ref)):.3g}")
     assert names == ref_names
@@ -165,3 +188,88 @@ def test_servo_press_pair_wired_by_the_c_host_matches_crankfmu_jacobi(host, cata
     # The issue's bound: same algorithm, same numbers, 1e-9 relative (zeros must match exactly).
     np.testing.assert_allclose(rows, expected, rtol=1e-9, atol=0.0)
     assert rows[-1, 1 + names.index("press.phi")] > 1.0  # the press really turned (rad)
+
+
+# -- the bare host: no libpython, nothing preloaded, an empty environment -----------------------
+# As `env -i PATH=/usr/bin:/bin`, but for this machine's OPENBLAS_* settings (e.g.
+# OPENBLAS_CORETYPE): without them OpenBLAS picks other kernels, and PlanetaryClutchDrive's numbers
+# differ from fmpy's in this process in the last bit (4e-16, measured), which has nothing to do
+# with the host.
+BARE_ENV = {"PATH": "/usr/bin:/bin",
+            **{k: v for k, v in os.environ.items() if k.startswith("OPENBLAS_")}}
+
+
+@pytest.fixture(scope="module")
+def bare_host(tmp_path_factory) -> Path:
+    """host.c without HOST_OWNS_PYTHON: no Python header, not linked with libpython."""
+    gcc = shutil.which("gcc")
+    if gcc is None:
+        if os.environ.get("CI"):
+            raise AssertionError("gcc not found on PATH (CI must have it)")
+        pytest.skip("gcc not found on PATH: cannot compile the C host")
+    exe = tmp_path_factory.mktemp("bare_host") / "bare_host"
+    cmd = [gcc, "-O2", "-Wall", "-Wextra", "-Werror", "-o", str(exe), str(HOST_SOURCE), "-ldl",
+           "-lm"]
+    done = subprocess.run(cmd, capture_output=True, text=True)
+    assert done.returncode == 0, f"{' '.join(cmd)}\n{done.stderr}"
+    needed = subprocess.run(["readelf", "-d", str(exe)], capture_output=True, text=True).stdout
+    assert "NEEDED" in needed and "libpython" not in needed, needed
+    return exe
+
+
+def test_every_fmu_in_the_bare_c_host_matches_fmpy_bit_for_bit(bare_host, catalog, tmp_path):
+    """All catalog FMUs in one bare host process (unconnected, so each runs alone on its start
+    values), in an empty environment: the launchers start Python in the build's environment
+    (this one), so the numbers equal fmpy's in this process bit for bit."""
+    config, columns = [f"step {1e-3!r}", f"steps {N_STEPS}", f"tolerance {1e-8!r}"], {}
+    for k, model in enumerate(FMU_MODELS):
+        md = read_model_description(str(catalog[model]))
+        assert float(md.defaultExperiment.stepSize) == 1e-3  # one step for all
+        assert float(md.defaultExperiment.tolerance) == 1e-8
+        config.append(fmu_line(model, catalog[model], tmp_path))
+        outs = real_outputs(md)
+        config += [f"output {k} {v.valueReference} {model}.{v.name}" for v in outs]
+        columns[model] = [f"{model}.{v.name}" for v in outs]
+    wall = time.perf_counter()
+    names, rows, _ = run_host(bare_host, config, tmp_path, env=BARE_ENV)
+    wall = time.perf_counter() - wall
+    worst = 0.0
+    for model, cols in columns.items():
+        _, ref = fmpy_reference(catalog[model], 1e-3, 1e-8, model)
+        got = rows[:, [0] + [1 + names.index(c) for c in cols]]
+        worst = max(worst, float(np.max(np.abs(got - ref))))
+        np.testing.assert_array_equal(got, ref, err_msg=model)
+    print(f"\nbare C host (no libpython, env -i): {len(columns)} FMUs x {N_STEPS} steps in "
+          f"{wall:.2f} s wall incl. Python start; max |C - fmpy| = {worst:.3g}")
+
+
+def test_bare_host_gets_fmi2error_for_impossible_parameters_and_frees(bare_host, catalog,
+                                                                      tmp_path):
+    md = read_model_description(str(catalog["StephensonPress"]))
+    l_vr = next(v.valueReference for v in md.modelVariables if v.name == "l")
+    config = [fmu_line("press", catalog["StephensonPress"], tmp_path), f"real 0 {l_vr} 0.01"]
+    _, _, stderr = run_host(bare_host, config, tmp_path, env=BARE_ENV, returncode=3)
+    assert "host: fmi2ExitInitializationMode returned status 3 for FMU 0" in stderr  # fmi2Error
+    assert "parameter l = 0.01 is not allowed" in stderr  # the reason, logged at error level
+    assert "host: freed" in stderr.splitlines()[-1]  # fmi2FreeInstance returned, clean exit
+
+
+def test_bare_host_without_scipy_fails_at_instantiate_naming_scipy(bare_host, catalog,
+                                                                   tmp_path, no_scipy_env):
+    config = [fmu_line("m", catalog["DcServoMotor"], tmp_path), "steps 1"]
+    env = {**BARE_ENV, "CRANKFMU_PYTHON": str(no_scipy_env)}
+    _, _, stderr = run_host(bare_host, config, tmp_path, env=env, returncode=2)
+    assert "fmi2Instantiate returned NULL" in stderr
+    message = next(line for line in stderr.splitlines() if "fmi2Instantiate:" in line)
+    assert "No module named 'scipy'" in message and str(no_scipy_env) in message
+    assert "CRANKFMU_PYTHON" in message  # how to point the FMU at another environment
+
+
+def test_bare_host_with_no_python_there_fails_at_instantiate_saying_so(bare_host, catalog,
+                                                                      tmp_path):
+    config = [fmu_line("m", catalog["DcServoMotor"], tmp_path), "steps 1"]
+    nowhere = tmp_path / "no-such-python"
+    env = {**BARE_ENV, "CRANKFMU_PYTHON": str(nowhere)}
+    _, _, stderr = run_host(bare_host, config, tmp_path, env=env, returncode=2)
+    message = next(line for line in stderr.splitlines() if "fmi2Instantiate:" in line)
+    assert f"CRANKFMU_PYTHON gives {nowhere}: no python executable there" in message, message

@@ -77,3 +77,127 @@ def test_two_ecos_runs_in_one_process_give_the_same_numbers(jacobi_scene, fmu_di
     first, second = ecos.run(plan), ecos.run(plan)
     for name in first.columns:
         np.testing.assert_array_equal(first.column(name), second.column(name))
+
+
+# -- ecos's native command-line simulator, from a bare environment -------------------------------
+# The `ecos` executable in the ecospy wheel is a C++ program that does not run Python: before the
+# FMU launcher it crashed (exit 139) on every crankfmu FMU. It is run here with `env -i
+# PATH=/usr/bin:/bin` (plus this machine's OPENBLAS_* settings, which only pick BLAS kernels);
+# the FMUs' launchers start Python in the build's environment. ecos writes its CSV with 6
+# decimals (%f), so "equal" is |ecos - other| <= 5e-7 (half the last printed digit).
+CSV_HALF_DIGIT = 5.0000001e-7
+NATIVE_STOP = 0.05  # s, 50 steps of 1 ms
+
+
+@pytest.fixture(scope="module")
+def ecos_cli(tmp_path_factory) -> Path:
+    import os
+    import shutil
+    from pathlib import Path as _Path
+
+    import ecospy
+    source = _Path(ecospy.__file__).parent / "binaries" / "ecos"
+    if not source.exists():
+        if os.environ.get("CI"):
+            raise AssertionError(f"{source} missing from the ecospy wheel")
+        pytest.skip(f"{source} missing from the ecospy wheel")
+    exe = tmp_path_factory.mktemp("ecos_cli") / "ecos"
+    shutil.copyfile(source, exe)  # the wheel ships it without the executable bit
+    exe.chmod(0o755)
+    return exe
+
+
+def run_ecos_cli(exe, path, stop: float, cwd, *extra: str) -> dict[str, np.ndarray]:
+    """`ecos simulate` on an .fmu or .ssp in a bare environment; the CSV as {column: values}
+    with columns 'time' and 'instance.variable' (Real variables only)."""
+    import os
+    import subprocess
+    env = {"PATH": "/usr/bin:/bin",
+           **{k: v for k, v in os.environ.items() if k.startswith("OPENBLAS_")}}
+    cmd = [str(exe), "simulate", "--path", str(path), "--stepSize", "0.001", "--stopTime",
+           repr(stop), "--noParallel", *extra]
+    done = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, f"{' '.join(cmd)}: exit {done.returncode}\n" \
+                                 f"{(done.stdout + done.stderr)[-3000:]}"
+    csv = next(iter(sorted(cwd.glob(f"{path.stem}*.csv"))))
+    header, *lines = csv.read_text().splitlines()
+    names = [h.strip() for h in header.split(",")]
+    data = np.array([[float(v) for v in line.split(",")] for line in lines])
+    columns = {"time": data[:, names.index("time")]}
+    for k, name in enumerate(names):
+        if name.endswith("[REAL]"):
+            columns[name[:-len("[REAL]")].replace("::", ".")] = data[:, k]
+    return columns
+
+
+def _unconnected_ssp(fmus: dict, path):
+    """An SSP 1.0 archive holding the FMUs side by side: no connections, no parameters."""
+    import zipfile
+    components = "".join(
+        f'<ssd:Component name="{name}" type="application/x-fmu-sharedlibrary" '
+        f'source="resources/{name}.fmu"/>' for name in fmus)
+    ssd = ('<?xml version="1.0" encoding="UTF-8"?>'
+           '<ssd:SystemStructureDescription xmlns:ssd="http://ssp-standard.org/SSP1/'
+           'SystemStructureDescription" version="1.0" name="catalog"><ssd:System name="catalog">'
+           f'<ssd:Elements>{components}</ssd:Elements></ssd:System>'
+           '</ssd:SystemStructureDescription>')
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr("SystemStructure.ssd", ssd)
+        for name, fmu in fmus.items():
+            z.write(fmu, f"resources/{name}.fmu")
+    return path
+
+
+def test_every_fmu_runs_in_the_native_ecos_cli_as_in_fmpy(catalog_fmus, ecos_cli, tmp_path):
+    """All catalog FMUs, unconnected, in one native ecos run (one Python start): each on its
+    start values, compared with fmpy stepping the same FMU alone in this process."""
+    from crankfmu.cosim.fmu import FmuInstance  # noqa: F401 (the exit-order fix in this process)
+    from importer_support import step_in_process
+    fmus = {model: catalog_fmus / f"{model}.fmu" for model in FMU_MODELS}
+    got = run_ecos_cli(ecos_cli, _unconnected_ssp(fmus, tmp_path / "catalog.ssp"), NATIVE_STOP,
+                       tmp_path)
+    for model, path in fmus.items():
+        names, ref = step_in_process(path, 1e-3, round(NATIVE_STOP / 1e-3), 1e-8, name=model)
+        ref = ref[:len(got["time"])]  # ecos writes no row at the stop time (t = 0 .. 0.049 s)
+        np.testing.assert_allclose(got["time"], ref[:, 0], rtol=0, atol=1e-12)
+        worst = 0.0
+        for k, name in enumerate(names):
+            column = got[f"{model}.{name}"]
+            worst = max(worst, float(np.max(np.abs(column - ref[:, k + 1]))))
+            np.testing.assert_allclose(column, ref[:, k + 1], rtol=1e-15, atol=CSV_HALF_DIGIT,
+                                       err_msg=f"{model}.{name}")
+        print(f"\n{model}: native ecos vs fmpy, {len(names)} outputs x {len(ref)} rows: max "
+              f"|diff| = {worst:.3g} (CSV printed with 6 decimals)", end="")
+
+
+def test_servo_press_ssp_in_the_native_ecos_cli_equals_crankfmu_jacobi(jacobi_scene, fmu_dir,
+                                                                       ecos_cli, tmp_path):
+    """`crankfmu export-ssp` of the servo press, run by the native ecos as a two-FMU system
+    (ecos's own Jacobi master): crankfmu's Jacobi numbers to the 6 printed decimals."""
+    from crankfmu.ssp import export_ssp
+    rec = run_scene(jacobi_scene, RunOptions(out=tmp_path / "jacobi.csv", fmu_dir=fmu_dir,
+                                             progress=False)).recorder
+    ssp = export_ssp(jacobi_scene, tmp_path / "servo_press.ssp", fmu_dir)
+    # ecos applies a parameter set only when named; export-ssp names it after the scene
+    got = run_ecos_cli(ecos_cli, ssp, jacobi_scene.stop_time, tmp_path, "--parameterSet",
+                       jacobi_scene.name)
+    n = len(got["time"])  # ecos writes no row at the stop time
+    assert n == len(rec.rows) - 1
+    np.testing.assert_allclose(got["time"], rec.rows[:n, 0], rtol=0, atol=1e-12)
+    worst = 0.0
+    for name in rec.names:
+        worst = max(worst, float(np.max(np.abs(got[name] - rec.column(name)[:n]))))
+        np.testing.assert_allclose(got[name], rec.column(name)[:n], rtol=1e-15,
+                                   atol=CSV_HALF_DIGIT, err_msg=name)
+    print(f"\nservo press SSP in native ecos vs crankfmu Jacobi, {len(rec.rows) - 1} steps: max "
+          f"|diff| = {worst:.3g} over {', '.join(rec.names)}; w_crank at "
+          f"{got['time'][-1]:g} s = {got['press.w_crank'][-1]:.6f} rad/s")
+    assert got["press.phi"][-1] > 1.0
+    # 6 decimals tell the masters apart: Gauss-Seidel at the same step is far from ecos
+    jacobi_scene.master.algorithm = "gauss-seidel"
+    try:
+        gs = run_scene(jacobi_scene, RunOptions(out=tmp_path / "gs.csv", fmu_dir=fmu_dir,
+                                                progress=False)).recorder
+    finally:
+        jacobi_scene.master.algorithm = "jacobi"
+    assert np.max(np.abs(got["press.w_crank"] - gs.column("press.w_crank")[:n])) > 1e-4

@@ -1,8 +1,15 @@
-/* A plain C FMI 2.0 Co-Simulation host for crankfmu's tests.
+/* A plain C FMI 2.0 Co-Simulation host for crankfmu's tests, built two ways:
  *
- * It owns the Python interpreter (pythonfmu's binary only starts one when none is running), loads
- * one or more unzipped FMUs with dlopen, wires them with a Jacobi master at a fixed step and prints
- * the requested outputs as CSV (time first, %.17g so a reader gets the exact doubles).
+ * - with -DHOST_OWNS_PYTHON (and libpython): it owns the Python interpreter, started before any
+ *   FMU is loaded and pointed at the environment of the `python` directive (the way a C host had
+ *   to run pythonfmu's binary before crankfmu's launcher);
+ * - without (the "bare" host): no Python.h, no libpython, dlopen and fmi2 calls only, as any
+ *   native FMI host; the FMU's launcher finds and starts Python itself.
+ *
+ * It loads one or more unzipped FMUs with dlopen, wires them with a Jacobi master at a fixed step
+ * and prints the requested outputs as CSV (time first, %.17g so a reader gets the exact doubles).
+ * A failed fmi2ExitInitializationMode is reported on stderr ("host: fmi2ExitInitializationMode
+ * returned status S for FMU K"), every instance is then freed ("host: freed"), exit code 3.
  *
  * Usage: host CONFIG_FILE            (results on stdout, FMU log messages on stderr)
  *
@@ -22,9 +29,12 @@
  * its outputs; every step takes all inputs from the buffers at t, steps every FMU from t to
  * t + h, then refreshes the buffers.
  *
- * Build (see tests/test_importer_c.py): gcc host.c -I<python include> <libpython flags> -ldl
+ * Build (see tests/test_importer_c.py): gcc -DHOST_OWNS_PYTHON host.c -I<python include>
+ * <libpython flags> -ldl, or gcc host.c -ldl (bare)
  */
+#ifdef HOST_OWNS_PYTHON
 #include <Python.h>
+#endif
 
 #include <dlfcn.h>
 #include <limits.h>
@@ -163,6 +173,7 @@ static void read_config(const char *path) {
     if (!n_fmus) die("%s: no fmu line", path);
 }
 
+#ifdef HOST_OWNS_PYTHON
 /* The host owns the interpreter: started before any FMU is loaded, so pythonfmu's binary finds
  * it running and neither starts nor finalizes one. program_name = the venv's python makes Python
  * read its pyvenv.cfg, so site-packages (numpy, scipy, pythonfmu) are on sys.path. */
@@ -183,6 +194,7 @@ static PyThreadState *start_python(void) {
     /* Release the GIL: pythonfmu takes it with PyGILState_Ensure in every call. */
     return PyEval_SaveThread();
 }
+#endif
 
 static void load(Fmu *f, int k, const fmi2CallbackFunctions *callbacks) {
     char lib[PATH_MAX + 512], uri[PATH_MAX + 64];
@@ -232,7 +244,9 @@ static void print_row(double t) {
 int main(int argc, char **argv) {
     if (argc != 2) die("usage: %s CONFIG_FILE", argv[0]);
     read_config(argv[1]);
+#ifdef HOST_OWNS_PYTHON
     PyThreadState *main_thread = start_python();
+#endif
     fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};
 
     for (int k = 0; k < n_fmus; k++) {
@@ -251,8 +265,16 @@ int main(int argc, char **argv) {
         check(fmus[k].enter_init(fmus[k].c), "fmi2EnterInitializationMode", k);
     for (int sweep = 0; sweep <= n_fmus; sweep++)
         for (int k = 0; k < n_fmus; k++) { write_inputs(k); refresh_buffers(k); }
-    for (int k = 0; k < n_fmus; k++)
-        check(fmus[k].exit_init(fmus[k].c), "fmi2ExitInitializationMode", k);
+    for (int k = 0; k < n_fmus; k++) {
+        fmi2Status status = fmus[k].exit_init(fmus[k].c);
+        if (status > fmi2Warning) {
+            fprintf(stderr, "host: fmi2ExitInitializationMode returned status %d for FMU %d\n",
+                    (int)status, k);
+            for (int j = 0; j < n_fmus; j++) fmus[j].free_instance(fmus[j].c);
+            fprintf(stderr, "host: freed\n");
+            return 3;
+        }
+    }
     for (int k = 0; k < n_fmus; k++) { write_inputs(k); refresh_buffers(k); }
 
     printf("time");
@@ -273,11 +295,16 @@ int main(int argc, char **argv) {
         check(fmus[k].terminate(fmus[k].c), "fmi2Terminate", k);
         fmus[k].free_instance(fmus[k].c);
     }
+#ifdef HOST_OWNS_PYTHON
     /* Finalize while the FMU libraries are still loaded (their code may run in finalizers),
      * then unload them. */
     PyEval_RestoreThread(main_thread);
     int finalized = Py_FinalizeEx();
     for (int k = 0; k < n_fmus; k++) dlclose(fmus[k].lib);
     if (finalized < 0) die("Py_FinalizeEx failed");
+#else
+    /* The launcher's interpreter lives until the process exits; unloading is the host's. */
+    for (int k = 0; k < n_fmus; k++) dlclose(fmus[k].lib);
+#endif
     return 0;
 }

@@ -22,6 +22,7 @@ from pathlib import Path
 
 from ..physics.catalog import FMU_MODELS, physics_class
 from ..slaves.base import ModelSlave, variable_table
+from .launcher import compile_launcher, hosting_html, package_binary
 from .model_description import model_description, sources_digest
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
@@ -152,12 +153,23 @@ def _repack(built: Path, target: Path, model_name: str, slave_class, digest: str
                 entries[info.filename] = z.read(info)
     entries["modelDescription.xml"] = model_description(slave_class, digest)
     entries["documentation/index.html"] = model_card_html(model_name).encode()
+    _package_launcher(entries, slave_class.physics_class.model_name)
     with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as z:
         for name in sorted(entries):
             info = zipfile.ZipInfo(name, ZIP_DATE)
             info.compress_type = zipfile.ZIP_DEFLATED
             info.external_attr = 0o644 << 16
             z.writestr(info, entries[name])
+
+
+def _package_launcher(entries: dict[str, bytes], model_identifier: str) -> None:
+    """The native launcher in front of pythonfmu's binary (fmi/launcher), and the model card's
+    section on hosting the FMU; without a C compiler the binary stays (the card says so)."""
+    launcher = compile_launcher()
+    package_binary(entries, model_identifier, launcher)
+    card = entries["documentation/index.html"].decode()
+    entries["documentation/index.html"] = card.replace(
+        "</body>", hosting_html(launcher is not None) + "</body>").encode()
 
 
 def build_fmu(model_name: str, dest: Path) -> Path:

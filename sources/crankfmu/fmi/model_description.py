@@ -47,7 +47,7 @@ def _unit_definitions(root: Element, table) -> None:
     for unit in units:
         u = SubElement(node, "Unit", {"name": unit})
         base = base_unit_attributes(unit)
-        if base:
+        if base is not None:  # every unit whose SI exponents are integers (fmi/units.py)
             SubElement(u, "BaseUnit", base)
 
 

@@ -137,8 +137,9 @@ def _add_constant_inputs(scene: Scene, comps: dict[str, ComponentPlan]) -> None:
 
 def _check_parameters(scene: Scene, descs: dict) -> None:
     """Impossible parameters of catalog FMUs, refused here with the physics' own message:
-    inside libcosim and ecos the FMU's fatal error in initialization kills the whole process
-    (measured: libcosim aborts on an uncaught C++ exception, ecos segfaults)."""
+    inside libcosim an FMU's failed initialization kills the whole process (measured: libcosim
+    aborts on an uncaught C++ exception, for fmi2Fatal and for the launcher's fmi2Error alike),
+    and ecos used to segfault on it (now it runs on with a failed instance)."""
     from ..physics.base import ParameterError
     from ..physics.catalog import FMU_MODELS, make_physics
     for name, comp in scene.components.items():

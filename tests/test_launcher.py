@@ -1,0 +1,132 @@
+"""The native launcher in front of pythonfmu's binary (crankfmu/fmi/launcher): what the FMU
+carries, and how it fails, seen from fmpy. Hosts without Python: tests/test_importer_c.py (the
+bare C host) and tests/test_importer_ecos.py (the native ecos command line)."""
+from __future__ import annotations
+
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+
+
+def _zip(fmu: Path) -> dict[str, bytes]:
+    with zipfile.ZipFile(fmu) as z:
+        return {n: z.read(n) for n in z.namelist()}
+
+
+def test_the_fmu_binary_is_the_launcher_without_python_symbols(fmu_dir, tmp_path):
+    files = _zip(fmu_dir / "DcServoMotor.fmu")
+    launcher = tmp_path / "DcServoMotor.so"
+    launcher.write_bytes(files["binaries/linux64/DcServoMotor.so"])
+    assert "binaries/linux64/DcServoMotor_pythonfmu.so" in files
+    config = files["resources/crankfmu_launcher.txt"].decode()
+    assert f"python = {sys.executable}\n" in config and "requires = numpy scipy\n" in config
+    dynamic = subprocess.run(["readelf", "-d", str(launcher)], capture_output=True,
+                             text=True).stdout
+    assert "libpython" not in dynamic
+    undefined = subprocess.run(["nm", "-D", "--undefined-only", str(launcher)],
+                               capture_output=True, text=True).stdout.split()
+    assert not [s for s in undefined if s.startswith(("Py", "_Py"))]
+    exported = subprocess.run(["nm", "-D", "--defined-only", str(launcher)], capture_output=True,
+                              text=True).stdout
+    real = tmp_path / "real.so"
+    real.write_bytes(files["binaries/linux64/DcServoMotor_pythonfmu.so"])
+    real_fmi = {w for w in subprocess.run(["nm", "-D", "--defined-only", str(real)],
+                                          capture_output=True, text=True).stdout.split()
+                if w.startswith("fmi2")}
+    assert real_fmi and real_fmi <= set(exported.split())  # every fmi2 function forwarded
+    card = files["documentation/index.html"].decode()
+    assert "Using the FMUs in other tools" in card and "CRANKFMU_PYTHON" in card
+
+
+FAILING_INIT = r'''
+import sys
+from fmpy import extract, read_model_description
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import FMU2Slave
+path = sys.argv[1]
+md = read_model_description(path)
+vr = {v.name: v.valueReference for v in md.modelVariables}
+s = FMU2Slave(guid=md.guid, unzipDirectory=extract(path), modelIdentifier=md.coSimulation.modelIdentifier, instanceName="press")
+s.instantiate()  # default callbacks: fmpy prints every message it is given, no debug logging
+s.setupExperiment(startTime=0.0)
+s.setReal([vr["l"]], [0.01])
+s.enterInitializationMode()
+try:
+    s.exitInitializationMode()
+except FMICallException as err:
+    print("exitInitializationMode status", err.status, flush=True)
+s.reset()  # a fresh instance: now with a rod that fits
+s.setupExperiment(startTime=0.0)
+s.setReal([vr["l"]], [0.25])
+s.enterInitializationMode()
+s.exitInitializationMode()
+s.doStep(0.0, 1e-3)
+print("after reset: phi", s.getReal([vr["phi"]])[0], flush=True)
+s.terminate()
+s.freeInstance()
+print("freed", flush=True)
+'''
+
+
+def test_fmpy_gets_fmi2error_for_impossible_parameters_then_resets_and_frees(fmu_dir):
+    """--set press.l=0.01 (rod shorter than the crank) in a fresh fmpy process: fmi2Error
+    (3), the reason printed by fmpy's default logger without debug logging, then fmi2Reset gives
+    a working instance, fmi2FreeInstance succeeds, and the process exits with 0."""
+    done = subprocess.run([sys.executable, "-c", FAILING_INIT,
+                           str(fmu_dir / "StephensonPress.fmu")],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stdout + done.stderr
+    out = done.stdout.splitlines()
+    assert "exitInitializationMode status 3" in out  # fmi2Error, not fmi2Fatal (4)
+    assert any(line.startswith("[ERROR]") and "parameter l = 0.01 is not allowed" in line
+               for line in out), done.stdout
+    assert not any(line.startswith("[FATAL]") for line in out), done.stdout
+    assert any(line.startswith("after reset: phi") for line in out) and out[-1] == "freed"
+
+
+def test_fmpy_in_an_environment_without_scipy_names_scipy(fmu_dir, no_scipy_env):
+    """fmpy run by an environment without scipy: the FMU uses that process's interpreter; the
+    launcher's pre-flight fails fmi2Instantiate, and fmpy prints why without debug logging."""
+    code = ("import sys, fmpy\n"
+            "fmpy.simulate_fmu(sys.argv[1], stop_time=0.01)\n")
+    done = subprocess.run([str(no_scipy_env / "bin" / "python"), "-c", code,
+                           str(fmu_dir / "DcServoMotor.fmu")],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode != 0 and "Failed to instantiate model" in done.stderr
+    message = next(line for line in done.stdout.splitlines() if "fmi2Instantiate" in line)
+    assert message.startswith("[ERROR]") and "No module named 'scipy'" in message, message
+    assert str(no_scipy_env) in message  # which Python it looked in
+
+
+def test_without_a_c_compiler_the_build_keeps_pythonfmus_binary_and_says_so(
+        tmp_path, monkeypatch, capsys):
+    from crankfmu.fmi import launcher
+    from crankfmu.fmi.build import build_fmu, validate
+
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-cc"))
+    monkeypatch.setattr(launcher, "_WARNED", [])
+    fmu = build_fmu("Rotor", tmp_path)
+    assert "WARNING: crankfmu build: no C compiler found" in capsys.readouterr().err
+    files = _zip(fmu)
+    assert "binaries/linux64/Rotor_pythonfmu.so" not in files
+    assert "resources/crankfmu_launcher.txt" not in files
+    import pythonfmu
+    export = Path(pythonfmu.__file__).parent / "resources" / "binaries" / "linux64" / \
+        "libpythonfmu-export.so"
+    assert files["binaries/linux64/Rotor.so"] == export.read_bytes()
+    assert "built without a C compiler" in files["documentation/index.html"].decode()
+    assert validate(fmu) == []
+
+
+def test_launcher_compile_is_deterministic():
+    from crankfmu.fmi import launcher
+
+    if launcher.find_compiler() is None:
+        pytest.skip("no C compiler")
+    source = launcher.SOURCE.read_bytes()
+    first = launcher._compile(tuple(launcher.find_compiler()), source)
+    launcher._compile.cache_clear()
+    assert launcher._compile(tuple(launcher.find_compiler()), source) == first
