@@ -207,7 +207,8 @@ def part_b(out: Path, n: int, repeats: int) -> None:
 
 
 # -- (c) ---------------------------------------------------------------------------------------
-def _alone_seconds(fmu_path: Path, model, effects: list[str], n: int) -> float | str:
+def _alone_seconds(fmu_path: Path, model, effects: list[str], n: int,
+                   parameters: dict | None = None) -> float | str:
     from crankfmu.cosim.fmu import FmuInstance, LogCollector
 
     log = LogCollector()
@@ -216,7 +217,8 @@ def _alone_seconds(fmu_path: Path, model, effects: list[str], n: int) -> float |
         fmu.instantiate()
         fmu.setup(0.0, 1e9, 1e-8)
         fmu.slave.enterInitializationMode()
-        fmu.set_start_values({f"effect_{e.name}": e.name in effects for e in model.effects})
+        fmu.set_start_values({f"effect_{e.name}": e.name in effects for e in model.effects}
+                             | (parameters or {}))
         fmu.slave.exitInitializationMode()
         do_step, c = fmu.slave._functions["fmi2DoStep"], fmu.slave.component
         start = CLOCK()
@@ -249,6 +251,11 @@ def part_c(n: int) -> None:
             cells.append(f"{label} {seconds * 1e6:.1f}" if isinstance(seconds, float)
                          else f"{label} {seconds}")
         print(f"    {name:<21} " + " | ".join(cells))
+    motor = physics_class("DcServoMotor")
+    lag = [_alone_seconds(fmu_dir / "DcServoMotor.fmu", motor, ["electrical_lag"], n,
+                          {"L_a": tau * 0.5, "flange_w": 10.0}) for tau in (1e-6, 1e-2)]
+    print(f"    DcServoMotor, electrical_lag with tau = 1e-6 s: {lag[0] * 1e6:.1f} us, with "
+          f"tau = 1e-2 s: {lag[1] * 1e6:.1f} us (R_a = 0.5 ohm; ratio {lag[0] / lag[1]:.2f})")
     print()
 
 

@@ -22,6 +22,7 @@ from pathlib import Path
 
 from ..physics.catalog import FMU_MODELS, physics_class
 from ..slaves.base import ModelSlave, variable_table
+from . import launcher
 from .launcher import compile_launcher, hosting_html, package_binary
 from .model_description import model_description, sources_digest
 
@@ -98,7 +99,8 @@ def runtime_files() -> list[tuple[str, bytes]]:
 def current_build_id() -> str:
     """Hash of the bundled runtime sources: the FMU's version and GUID seed (computed once)."""
     templates = [("<entry script>", ENTRY_SCRIPT.encode()),
-                 ("<runtime init>", RUNTIME_INIT.encode())]  # a changed template: a new build
+                 ("<runtime init>", RUNTIME_INIT.encode()),
+                 ("<launcher>", launcher.SOURCE.read_bytes())]  # changed: a new build
     return sources_digest(runtime_files() + templates)
 
 

@@ -231,7 +231,7 @@ class PhysicsModel:
 
     # -- the integrators behind advance -------------------------------------------------------
     def _check_inputs(self, t0: float, u_of_t: InputFunction) -> None:
-        if not all(math.isfinite(v) for v in u_of_t(t0)):
+        if not all(map(math.isfinite, u_of_t(t0))):
             raise IntegrationError(f"{self.model_name}: input not finite at t = {t0:.9g} s")
 
     def integrate(self, u_of_t: InputFunction, t: float, x, t_end: float, rtol: float, atol,
@@ -240,9 +240,14 @@ class PhysicsModel:
         solver: the runtime's Dormand-Prince (default), or scipy's solve_ivp with the method in
         `integrator` (solver = "scipy": the cross-check, and the monolithic reference)."""
         derivatives = self.derivatives
+        if getattr(u_of_t, "moving", True):
+            def rhs(s, y):
+                return derivatives(s, y, u_of_t(s))
+        else:  # held inputs: one list for the whole step
+            u = u_of_t(t)
 
-        def rhs(s, y):
-            return derivatives(s, y, u_of_t(s))
+            def rhs(s, y):
+                return derivatives(s, y, u)
         try:
             if self.solver == "scipy":
                 return self._integrate_scipy(rhs, u_of_t, t, x, t_end, rtol, atol, events)
@@ -298,17 +303,17 @@ def _per_state(atol, n: int) -> list:
 
 class InputPolynomial:
     """u(t) = u + d1 (t - t0) + d2 (t - t0)^2 / 2 on plain floats: the input as the master
-    extrapolates it over a step. Closed-form models read its coefficients (`taylor`)."""
+    extrapolates it over a step. Closed-form models read its coefficients (`taylor`).
+    u, d1, d2: lists of floats (taken as they are: the adapter calls this in every doStep)."""
 
     __slots__ = ("t0", "u", "d1", "d2", "_half_d2", "moving")
 
-    def __init__(self, t0: float, u, d1=None, d2=None):
-        self.t0 = float(t0)
-        self.u = [float(v) for v in u]
-        self.d1 = [float(v) for v in d1] if d1 is not None else [0.0] * len(self.u)
-        self.d2 = [float(v) for v in d2] if d2 is not None else [0.0] * len(self.u)
-        self._half_d2 = [0.5 * v for v in self.d2]
+    def __init__(self, t0: float, u: list, d1: list | None = None, d2: list | None = None):
+        self.t0, self.u = t0, u
+        self.d1 = d1 if d1 is not None else [0.0] * len(u)
+        self.d2 = d2 if d2 is not None else [0.0] * len(u)
         self.moving = any(self.d1) or any(self.d2)
+        self._half_d2 = [0.5 * v for v in self.d2] if self.moving else self.d2
 
     def __call__(self, t: float) -> list:
         if not self.moving:
@@ -324,7 +329,7 @@ class InputPolynomial:
 
 def held(u) -> InputFunction:
     """Zero-order hold: the input vector stays at u over the step."""
-    return InputPolynomial(0.0, u)
+    return InputPolynomial(0.0, [float(v) for v in u])
 
 
 def quadratic_coefficients(u_of_t: InputFunction, t0: float, h: float):

@@ -116,79 +116,73 @@ class StephensonPress(PhysicsModel):
             raise ParameterError(self.model_name, "forging_angle", p.forging_angle,
                                  "> 0 rad when effect forging_load is on")
 
-    # -- kinematics ------------------------------------------------------------------------
-    # Each function takes a scalar or an array phi: scalars go through `math` (the FMU's
-    # derivatives, ~20x cheaper than numpy on one value), arrays through numpy (the analyses).
-    def kinematics(self, phi):
-        """(S, S', S'', psi, psi', psi'') for scalar or array phi."""
-        xp = _namespace(phi)
-        r, l = self.p.r, self.p.l
-        sin_phi, cos_phi = xp.sin(phi), xp.cos(phi)
-        cos_psi = -r * cos_phi / l
-        sin_psi = xp.sqrt(1.0 - cos_psi * cos_psi)
-        psi = _atan2(xp, sin_psi, cos_psi)
-        dpsi = -(r / l) * sin_phi / sin_psi
-        ddpsi = -((r / l) * cos_phi + dpsi * dpsi * cos_psi) / sin_psi
+    def __init__(self, parameters=None, effects=None):
+        super().__init__(parameters, effects)
+        # the effect switches, read in every right-hand-side call
+        self._driven, self._forging = self.on("driven_crank"), self.on("forging_load")
+        self._gravity, self._rods = self.on("gravity"), self.on("rod_inertia")
+        self._edge_events = (None, [])  # (edges, their event functions): see event_functions
+        p = self.p  # r, l, r/l, i^2, J1 + m2 r^2 (base link in circular translation), m5
+        self._constants = (p.r, p.l, p.r / p.l, p.gear_ratio ** 2, p.J1 + p.m2 * p.r ** 2, p.m5)
+
+    # -- the equations: one scalar core -----------------------------------------------------
+    # The right-hand side calls `crank_terms` on floats (math: ~20x cheaper than numpy on one
+    # value); the public functions below take a scalar or an array phi and reach the same core
+    # (np.vectorize for arrays: the analyses' grids), so each equation is written once.
+    def crank_terms(self, phi: float, J_input: float) -> tuple[float, ...]:
+        """(J, J'/2, M_C, F5, S, S', S'', psi, psi', psi'') at one crank angle: eq. (1)-(3),
+        (21)-(22). One function, not one per quantity: the right-hand side calls it 7 times per
+        step, and in Python the calls would cost as much as the arithmetic."""
+        p = self.p
+        r, l, r_l, i2_, J_fixed, m5 = self._constants
+        sin_phi, cos_phi = math.sin(phi), math.cos(phi)
+        cos_psi = -r_l * cos_phi
+        sin_psi = math.sqrt(1.0 - cos_psi * cos_psi)
+        dpsi = -r_l * sin_phi / sin_psi
+        ddpsi = -(r_l * cos_phi + dpsi * dpsi * cos_psi) / sin_psi
         S = r * sin_phi + l * sin_psi
         dS = r * cos_phi + l * dpsi * cos_psi
         ddS = -r * sin_phi - l * dpsi * dpsi * sin_psi + l * ddpsi * cos_psi
-        return S, dS, ddS, psi, dpsi, ddpsi
+        J = i2_ * J_input + J_fixed + m5 * dS * dS
+        half_dJ = m5 * dS * ddS
+        F5 = 0.0
+        if self._forging:  # half sine over the window ending at BDC
+            x = (phi - (0.5 * math.pi - p.forging_angle)) % (2 * math.pi)
+            if x <= p.forging_angle:
+                F5 = p.F_max * math.sin(math.pi * x / p.forging_angle)
+        M_C = -F5 * dS
+        if self._gravity:
+            M_C += m5 * p.g * dS + p.m2 * p.g * r * cos_phi
+        if self._rods:  # two uniform bars, centre C; C' and C'' as functions of phi
+            dCx, dCy = -0.5 * r * sin_phi, r * cos_phi + 0.5 * l * cos_psi * dpsi
+            ddCx = -0.5 * r * cos_phi
+            ddCy = -r * sin_phi + 0.5 * l * (ddpsi * cos_psi - dpsi * dpsi * sin_psi)
+            J_rod = p.m_rod * l * l / 12.0
+            J += 2.0 * (p.m_rod * (dCx * dCx + dCy * dCy) + J_rod * dpsi * dpsi)
+            half_dJ += 2.0 * (p.m_rod * (dCx * ddCx + dCy * ddCy) + J_rod * dpsi * ddpsi)
+            if self._gravity:
+                M_C += 2.0 * p.m_rod * p.g * dCy
+        return (J, half_dJ, M_C, F5, S, dS, ddS, math.atan2(sin_psi, cos_psi), dpsi, ddpsi)
 
-    def rod_centre_velocity(self, phi):
-        """(C', C'') of a rod's centre of mass, each as (x, y) over phi."""
-        xp = _namespace(phi)
-        r, l = self.p.r, self.p.l
-        _, _, _, psi, dpsi, ddpsi = self.kinematics(phi)
-        sin_phi, cos_phi, sin_psi, cos_psi = xp.sin(phi), xp.cos(phi), xp.sin(psi), xp.cos(psi)
-        dC = (-0.5 * r * sin_phi, r * cos_phi + 0.5 * l * cos_psi * dpsi)
-        ddC = (-0.5 * r * cos_phi,
-               -r * sin_phi + 0.5 * l * (ddpsi * cos_psi - dpsi * dpsi * sin_psi))
-        return dC, ddC
+    def kinematics(self, phi):
+        """(S, S', S'', psi, psi', psi'') for scalar or array phi."""
+        return _over(lambda a: self.crank_terms(a, 0.0)[4:], phi, 6)
+
+    def reduced_inertia(self, phi, J_input: float):
+        """(J(phi), J'(phi)/2) at the crank."""
+        return _over(lambda a: self.crank_terms(a, J_input)[:2], phi, 2)
+
+    def resistance_moment(self, phi):
+        """M_C(phi) at the crank: forging force and weights (their generalized forces)."""
+        return _over(lambda a: self.crank_terms(a, 0.0)[2], phi, 1)
+
+    def forging_force(self, phi):
+        return _over(lambda a: self.crank_terms(a, 0.0)[3], phi, 1)
 
     def J_constant(self, J_input: float) -> float:
         """J_c = i^2 J_input + J1 + m2 r^2 (base link in circular translation, eq. 21-22)."""
         p = self.p
         return p.gear_ratio ** 2 * J_input + p.J1 + p.m2 * p.r ** 2
-
-    def reduced_inertia(self, phi, J_input: float, kin=None):
-        """(J(phi), J'(phi)/2) at the crank (kin: kinematics(phi) if already at hand)."""
-        p = self.p
-        _, dS, ddS, _, dpsi, ddpsi = self.kinematics(phi) if kin is None else kin
-        J = self.J_constant(J_input) + p.m5 * dS ** 2
-        half_dJ = p.m5 * dS * ddS
-        if self.on("rod_inertia"):
-            (dCx, dCy), (ddCx, ddCy) = self.rod_centre_velocity(phi)
-            J_rod = p.m_rod * p.l ** 2 / 12.0
-            J = J + 2.0 * (p.m_rod * (dCx ** 2 + dCy ** 2) + J_rod * dpsi ** 2)
-            half_dJ = half_dJ + 2.0 * (p.m_rod * (dCx * ddCx + dCy * ddCy) + J_rod * dpsi * ddpsi)
-        return J, half_dJ
-
-    def forging_force(self, phi):
-        p = self.p
-        scalar = _namespace(phi) is math
-        if not self.on("forging_load"):
-            return 0.0 if scalar else np.zeros_like(np.asarray(phi, dtype=float))
-        start = 0.5 * math.pi - p.forging_angle
-        if scalar:
-            x = (phi - start) % (2 * math.pi)
-            return p.F_max * math.sin(math.pi * x / p.forging_angle) \
-                if x <= p.forging_angle else 0.0
-        x = np.mod(np.asarray(phi, dtype=float) - start, 2 * math.pi)
-        inside = x <= p.forging_angle
-        return np.where(inside, p.F_max * np.sin(math.pi * np.minimum(x, p.forging_angle)
-                                                 / p.forging_angle), 0.0)
-
-    def resistance_moment(self, phi, kin=None):
-        """M_C(phi) at the crank: forging force and weights (their generalized forces)."""
-        p = self.p
-        dS = (self.kinematics(phi) if kin is None else kin)[1]
-        M = -self.forging_force(phi) * dS
-        if self.on("gravity"):
-            M = M + p.m5 * p.g * dS + p.m2 * p.g * p.r * _namespace(phi).cos(phi)
-            if self.on("rod_inertia"):
-                (_, dCy), _ = self.rod_centre_velocity(phi)
-                M = M + 2.0 * p.m_rod * p.g * dCy
-        return M
 
     # -- contract --------------------------------------------------------------------------
     def state_names(self):
@@ -209,17 +203,15 @@ class StephensonPress(PhysicsModel):
     def shaft_load(self, phi, w, J_input: float = 0.0) -> tuple[float, float]:
         """(shaft_tau, shaft_J) at the input shaft for crank angle phi and speed w = phi'."""
         i = self.p.gear_ratio
-        J, half_dJ = self.reduced_inertia(phi, J_input)
-        return (self.resistance_moment(phi) - half_dJ * w * w) / i, J / (i * i)
+        J, half_dJ, M_C = self.crank_terms(phi, J_input)[:3]
+        return (M_C - half_dJ * w * w) / i, J / (i * i)
 
     def derivatives(self, t, x, u):
-        if self.on("driven_crank"):
+        if self._driven:
             return ()
         phi, w = x
-        kin = self.kinematics(phi)
-        J, half_dJ = self.reduced_inertia(phi, u[1], kin)
-        dw = (self.p.gear_ratio * u[0] + self.resistance_moment(phi, kin) - half_dJ * w * w) / J
-        return (w, dw)
+        J, half_dJ, M_C = self.crank_terms(phi, u[1])[:3]
+        return (w, (self.p.gear_ratio * u[0] + M_C - half_dJ * w * w) / J)
 
     def event_functions(self, u_of_t):
         """The forging window's edges (phi = start and start + forging_angle, mod 2 pi), where
@@ -227,27 +219,27 @@ class StephensonPress(PhysicsModel):
         Two events: the next edge ahead of the restart angle (crossed upwards) and the last one
         behind it (crossed downwards, if the crank turns back); an edge within EDGE_BAND of the
         restart angle is the one just passed and does not count."""
-        if not self.on("forging_load") or self.on("driven_crank"):
+        if not self._forging or self._driven:
             return []
-        start = 0.5 * math.pi - self.p.forging_angle
         phi = self.restart_state[0]
         band = EDGE_BAND * max(1.0, abs(phi))
+        cached = self._edge_events[0]
+        if cached and cached[1] + band < phi < cached[0] - band:
+            return self._edge_events[1]
+        start = 0.5 * math.pi - self.p.forging_angle
         edges = [e + 2 * math.pi * k for k in (math.floor((phi - start) / (2 * math.pi)) + j
                                               for j in (-1, 0, 1))
                  for e in (start, start + self.p.forging_angle)]
-        ahead = min(e for e in edges if e > phi + band)
-        behind = max(e for e in edges if e < phi - band)
-        return [_crossing(ahead, +1), _crossing(behind, -1)]
+        pair = (min(e for e in edges if e > phi + band), max(e for e in edges if e < phi - band))
+        self._edge_events = (pair, [_crossing(pair[0], +1), _crossing(pair[1], -1)])
+        return self._edge_events[1]
 
     def output_values(self, t, x, u):
         phi, w = self.crank_motion(x, u)
         i = self.p.gear_ratio
-        kin = self.kinematics(phi)
-        S, dS = kin[:2]
-        J, half_dJ = self.reduced_inertia(phi, u[1], kin)
-        M_C = self.resistance_moment(phi, kin)
-        return [i * w, i * phi, phi, w, S, dS * w, self.forging_force(phi), J, M_C,
-                (M_C - half_dJ * w * w) / i, J / (i * i)]
+        J, half_dJ, M_C, F5, S, dS = self.crank_terms(phi, u[1])[:6]
+        return [i * w, i * phi, phi, w, S, dS * w, F5, J, M_C, (M_C - half_dJ * w * w) / i,
+                J / (i * i)]
 
 
 def _crossing(angle: float, direction: int):
@@ -258,10 +250,8 @@ def _crossing(angle: float, direction: int):
     return g
 
 
-def _namespace(phi):
-    """math for a scalar angle (float, numpy scalar), numpy for arrays."""
-    return math if isinstance(phi, (float, int)) else np
-
-
-def _atan2(xp, y, x):
-    return math.atan2(y, x) if xp is math else np.arctan2(y, x)
+def _over(scalar_function, phi, n_out: int):
+    """scalar_function at a scalar phi, or elementwise over an array (tuples of arrays)."""
+    if isinstance(phi, (float, int)):
+        return scalar_function(float(phi))
+    return np.vectorize(scalar_function, otypes=[float] * n_out)(np.asarray(phi, dtype=float))

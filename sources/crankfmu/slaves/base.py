@@ -174,7 +174,7 @@ class ModelSlave(Fmi2Slave):
         else:
             model, x = self._model, self._x
         y = model.output_values(self._time, x, self._inputs())
-        self._values[self._output_slice] = [float(v) for v in y]
+        self._values[self._output_slice] = list(map(float, y))
         self._outputs_stale = False
 
     def _bad_outputs(self) -> list[str]:
@@ -205,8 +205,24 @@ class ModelSlave(Fmi2Slave):
     def do_step(self, current_time, step_size):
         values = self._values
         d1, d2 = values[self._d1_slice], values[self._d2_slice]
-        moving = any(d1) or any(d2)
         u_of_t = InputPolynomial(current_time, values[self._input_slice], d1, d2)
+        t_end = current_time + step_size
+        if self._x:  # a model without states has nothing to integrate
+            if not self._advance(current_time, step_size, u_of_t):
+                return False
+        self._time = t_end
+        if u_of_t.moving:  # the input (and its slope) now stand at the step's end
+            values[self._input_slice] = u_of_t(t_end)
+            values[self._d1_slice] = [a + step_size * b for a, b in zip(d1, d2)]
+        self._refresh_outputs()
+        if not all(map(math.isfinite, values[self._output_slice])):
+            self.log(f"{self.instance_name}: output {', '.join(self._bad_outputs())} not finite "
+                     f"at t = {t_end:.9g} s", Fmi2Status.error)
+            return False
+        return True
+
+    def _advance(self, current_time: float, step_size: float, u_of_t) -> bool:
+        """The states over the step; False (with the reason logged) if that fails."""
         model = self._model
         try:
             x = model.advance(current_time, self._x, step_size, u_of_t, self._rtol, self._atol)
@@ -215,23 +231,12 @@ class ModelSlave(Fmi2Slave):
             self.log(f"{self.instance_name}: step at t = {current_time:.9g} s failed: {err}",
                      Fmi2Status.error)
             return False
-        t_end = current_time + step_size
         if not all(map(math.isfinite, x)):
             bad = [n for n, v in zip(model.state_names(), x) if not math.isfinite(v)]
             self.log(f"{self.instance_name}: state {', '.join(bad)} not finite at "
-                     f"t = {t_end:.9g} s", Fmi2Status.error)
+                     f"t = {current_time + step_size:.9g} s", Fmi2Status.error)
             return False
         self._x = x
-        self._time = t_end
-        if moving:  # the input (and its slope) now stand at the step's end
-            values[self._input_slice] = u_of_t(t_end)
-            values[self._d1_slice] = [a + step_size * b for a, b in zip(d1, d2)]
-        self._refresh_outputs()
-        bad = self._bad_outputs()
-        if bad:
-            self.log(f"{self.instance_name}: output {', '.join(bad)} not finite at "
-                     f"t = {t_end:.9g} s", Fmi2Status.error)
-            return False
         return True
 
     # -- state save / restore (internal states, modes and the step size too) --------------
