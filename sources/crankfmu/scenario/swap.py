@@ -119,6 +119,12 @@ def resolve_swap(path, data: dict, seen: tuple = ()) -> dict:
     if not isinstance(replace, list) or not all(isinstance(r, str) for r in replace):
         raise _error(path, "[swap].replace", "must be a list of component names of the base")
     base_path = (path.parent / swap["base"])
+    try:
+        if not base_path.is_file():
+            raise _error(path, "[swap].base", f"{base_path} is not a regular file (no such file, "
+                                              "or a folder or device): the base scene's TOML file")
+    except OSError as err:
+        raise _error(path, "[swap].base", f"{base_path}: {err.strerror or err}") from None
     base = copy.deepcopy(read_scene_table(base_path, seen or (path.resolve(),)))
     missing = [r for r in replace if r not in base.get("components", {})]
     if missing:
