@@ -133,6 +133,9 @@ def _outside(case_dir: Path, before: set[str], evil: list[str]) -> list[str]:
     return new
 
 
+outcomes: list[dict] = []
+
+
 def run_cases(cases: list[dict], work: Path, fmus: Path, timeout: float, tally, failures,
               label: str) -> None:
     w = None
@@ -158,6 +161,8 @@ def run_cases(cases: list[dict], work: Path, fmus: Path, timeout: float, tally, 
         tally[case["family"]][outcome] += 1
         for c in checks:
             tally[case["family"]][c] += 1
+        outcomes.append({"id": case["id"], "kind": case["kind"], "outcome": outcome,
+                         "detail": result.get("detail", "")[-300:]})
         if outcome not in ("ok", "error") or checks:
             failures.append({"id": case["id"], "kind": case["kind"], "outcome": outcome,
                              "checks": checks, "detail": result.get("detail", "")[-600:]})
@@ -258,7 +263,8 @@ def main() -> int:
         print(f"FAIL {f['id']} [{f['kind']}] {f['outcome']} {f['checks']}: "
               f"{f['detail'].strip().splitlines()[-1] if f['detail'].strip() else ''}")
     if args.json:
-        args.json.write_text(json.dumps({"tally": tally, "ctrl_c": ctrl, "failures": failures},
+        args.json.write_text(json.dumps({"tally": tally, "ctrl_c": ctrl, "failures": failures,
+                                         "outcomes": outcomes},
                                         indent=1))
     if not args.work:
         shutil.rmtree(work, ignore_errors=True)

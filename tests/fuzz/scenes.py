@@ -435,6 +435,7 @@ def write_case(case: dict, folder: Path) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
     for name, data in case["files"].items():
         path = folder / name
+        path.parent.mkdir(parents=True, exist_ok=True)
         if data is None:
             path.mkdir(exist_ok=True)
         else:

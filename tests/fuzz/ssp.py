@@ -65,7 +65,7 @@ LAUGHS = ('<!DOCTYPE lolz [<!ENTITY lol "lol"><!ENTITY lol1 "&lol;&lol;&lol;&lol
           '&lol2;&lol2;">]>\n')
 
 
-def ssp_cases(seed: int, n: int, base: bytes) -> list[dict]:
+def ssp_cases(seed: int, n: int, base: bytes, skip=()) -> list[dict]:
     rng = random.Random(seed)
     members = _members(base)
     fmu_name = "resources/Rotor.fmu"
@@ -158,7 +158,7 @@ def ssp_cases(seed: int, n: int, base: bytes) -> list[dict]:
         "corrupt_member": lambda: _corrupt(base),
         "ssp_directory": lambda: None,
     }
-    names = list(kinds)
+    names = [k for k in kinds if k not in skip]
     cases = []
     for i in range(n):
         kind = names[i % len(names)]
