@@ -1,4 +1,4 @@
-"""Hostile SSP archives: seeded mutations of a small exported archive (the rotor scene), of 36
+"""Hostile SSP archives: seeded mutations of a small exported archive (the rotor scene), of 40
 kinds. `ssp_cases(seed, n, base)` gives n cases (kinds in turn), each a dict with `files`
 ({relative path: bytes | None (a folder)}) and `scene` (the archive to run)."""
 from __future__ import annotations

@@ -15,8 +15,8 @@ from ..scenario.scene import Scene, SceneError, check_run_size
 from .fmu import FmuInstance, LogCollector
 from .masters import DivergenceError, make_master
 from .results import Recorder, plot, versions, write_csv, write_sidecar
-from .wiring import (System, check_components, check_links, check_loops, default_fmu_dir,
-                     resolve_fmu)
+from .wiring import (System, check_components, check_links, check_loops, check_physics,
+                     default_fmu_dir, resolve_fmu)
 
 
 class RunError(CrankfmuError, RuntimeError):
@@ -167,6 +167,7 @@ def run_scene(scene: Scene, options: RunOptions | None = None) -> RunResult:
     try:
         check_components(scene, fmus)
         links = check_links(scene, fmus)
+        check_physics(scene, fmus)
         system = System(scene, fmus, links)
         try:
             master = make_master(scene.master.algorithm, system, scene.master)

@@ -90,6 +90,29 @@ def check_components(scene: Scene, fmus: dict[str, FmuInstance]) -> None:
                                  f"{', '.join(known_effects) or '(none)'}")
 
 
+def check_physics(scene: Scene, fmus: dict[str, FmuInstance]) -> None:
+    """Impossible parameter values of catalog FMUs, refused before any FMU is instantiated,
+    with the physics model's own message (as the libcosim/ecos adapters do). Inside the FMU the
+    same check raises a Python exception in pythonfmu 0.7.0's binary, whose error path damages
+    the shared interpreter: after a few such failures a long-lived process crashes (measured:
+    a segmentation fault in garbage collection after some tens of failed runs in one process)."""
+    from ..physics.base import ParameterError
+    from ..physics.catalog import FMU_MODELS, physics_class
+    for name, comp in scene.components.items():
+        model = fmus[name].model_description.modelName
+        if model not in FMU_MODELS:
+            continue
+        key = f"[components.{name}].parameters"
+        try:
+            physics_class(model)({k: float(v) for k, v in comp.parameters.items()},
+                                 list(comp.effects))
+        except ParameterError as err:
+            raise SceneError(scene.path, key, str(err)) from None
+        except (ArithmeticError, ValueError) as err:  # e.g. an overflow from 1e300
+            raise SceneError(scene.path, key, f"{model} cannot take these values: "
+                                              f"{type(err).__name__}: {err}") from None
+
+
 def _check_value(scene, key, ref: str, var, value) -> None:
     """The value fits the parameter's type (a Boolean takes true/false, a Real a finite
     number: `--set press.m5=true` is not 1 kg) and the range its modelDescription declares."""
