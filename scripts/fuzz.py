@@ -206,7 +206,7 @@ def ctrl_c_campaign(n: int, fmus: Path, work: Path, seed: int) -> dict:
         proc = subprocess.Popen([sys.executable, "-m", "crankfmu", "run", str(scene), "--fmus",
                                  str(fmus), "--out", str(out), "--no-progress"], cwd=work,
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        time.sleep(rng.uniform(0.5, 60.0))
+        time.sleep(rng.uniform(3.0, 60.0))  # after the ~2 s of loading: within the run
         finished = proc.poll() is not None
         proc.send_signal(signal.SIGINT)
         _, stderr = proc.communicate(timeout=120)

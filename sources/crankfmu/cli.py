@@ -39,6 +39,7 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
 def load_with_options(args):
     """The scene with command-line overrides applied (shared by run-like commands); every value
     is checked as the same key in a scene file would be."""
+    from .errors import MAX_TIME
     from .scenario.scene import (SceneError, _integer, _number, apply_overrides, check_run_size,
                                  load_scene)
 
@@ -47,7 +48,7 @@ def load_with_options(args):
     m = scene.master
     if args.stop_time is not None:
         scene.stop_time = _number(scene.path, "--stop-time", args.stop_time,
-                                  minimum=-1e12, maximum=1e12)
+                                  minimum=-MAX_TIME, maximum=MAX_TIME)
         if scene.stop_time <= scene.start_time:
             raise SceneError(scene.path, "--stop-time", f"must exceed start_time = {scene.start_time}")
     for key in ("step", "tolerance", "fmu_tolerance"):

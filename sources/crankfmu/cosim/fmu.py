@@ -94,8 +94,13 @@ def extract_fmu(path: Path) -> str:
     (not once per run) means its binary is loaded once: a shared library is never unloaded
     here (see FmuInstance.terminate), so a new copy per run would grow the process by the
     library's size on every run."""
-    data = Path(path).read_bytes()
-    key = hashlib.sha256(data).hexdigest()
+    if Path(path).stat().st_size > MAX_FMU_UNPACKED_BYTES:
+        raise ValueError(f"larger than the limit of {MAX_FMU_UNPACKED_BYTES} bytes")
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        while chunk := f.read(1 << 20):
+            digest.update(chunk)
+    key = digest.hexdigest()
     folder = _extracted.get(key)
     if folder is not None and os.path.isdir(folder):
         return folder

@@ -120,9 +120,12 @@ def resolve_swap(path, data: dict, seen: tuple = ()) -> dict:
         raise _error(path, "[swap].replace", "must be a list of component names of the base")
     base_path = (path.parent / swap["base"])
     try:
+        if not base_path.exists():
+            raise _error(path, "[swap].base", f"{base_path}: no such scene file (the base scene, "
+                                              "relative to this file)")
         if not base_path.is_file():
-            raise _error(path, "[swap].base", f"{base_path} is not a regular file (no such file, "
-                                              "or a folder or device): the base scene's TOML file")
+            raise _error(path, "[swap].base", f"{base_path} is not a regular file (a folder or "
+                                              "device): the base scene's TOML file")
     except OSError as err:
         raise _error(path, "[swap].base", f"{base_path}: {err.strerror or err}") from None
     base = copy.deepcopy(read_scene_table(base_path, seen or (path.resolve(),)))
