@@ -15,7 +15,7 @@ the shared interpreter (a later garbage collection crashes), so one case's damag
 otherwise be counted against the next. Per case the tally counts:
     ok          exit 0                  error   exit 2 with "error: ..." (a clear refusal)
     traceback   any other exception     crash   the worker died (signal)    hang   timed out
-    nonfinite   a written CSV holds nan or inf
+    nonfinite   a written CSV holds nan or inf, or a sidecar NaN or Infinity
     outside     a file appeared outside the case's results/ folder, or at an evil path
 --ctrl-c N runs a 60 s scene N times in a subprocess and sends SIGINT at a random moment:
 each must exit 130 with a partial CSV.
@@ -123,6 +123,10 @@ def _nonfinite(folder: Path) -> list[str]:
                 if "nan" in low or "inf" in low:
                     bad.append(str(csv))
                     break
+    for sidecar in folder.rglob("*.json"):
+        text = sidecar.read_text(errors="replace")
+        if "NaN" in text or "Infinity" in text:
+            bad.append(str(sidecar))
     return bad
 
 

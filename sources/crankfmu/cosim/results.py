@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import platform
 import tempfile
@@ -77,8 +78,24 @@ def versions() -> dict:
     return out
 
 
+def _finite(value):
+    """The payload with NaN and infinities as null: strict JSON, and no non-finite number in a
+    written result (a failed run's statistics may hold them)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    if isinstance(value, np.generic):
+        return _finite(value.item())
+    if isinstance(value, np.ndarray):
+        return _finite(value.tolist())
+    return value
+
+
 def write_sidecar(path: Path, payload: dict) -> None:
-    text = json.dumps(payload, indent=2, default=float) + "\n"
+    text = json.dumps(_finite(payload), indent=2, default=float, allow_nan=False) + "\n"
     atomic_write(path, lambda f: f.write(text))
 
 

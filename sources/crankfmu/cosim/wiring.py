@@ -103,9 +103,17 @@ def check_physics(scene: Scene, fmus: dict[str, FmuInstance]) -> None:
         if model not in FMU_MODELS:
             continue
         key = f"[components.{name}].parameters"
+        effects = set(comp.effects)
+        values = {}
+        for k, v in comp.parameters.items():
+            if k.startswith("effect_"):  # an effect switched by its Boolean parameter
+                (effects.add if v else effects.discard)(k[len("effect_"):])
+            else:
+                values[k] = float(v)
         try:
-            physics_class(model)({k: float(v) for k, v in comp.parameters.items()},
-                                 list(comp.effects))
+            physics_class(model)(values, sorted(effects))
+        except (KeyError, TypeError):  # a model whose constructor differs: the FMU checks
+            continue
         except ParameterError as err:
             raise SceneError(scene.path, key, str(err)) from None
         except (ArithmeticError, ValueError) as err:  # e.g. an overflow from 1e300
