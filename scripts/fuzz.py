@@ -123,9 +123,12 @@ def _nonfinite(folder: Path) -> list[str]:
                 if "nan" in low or "inf" in low:
                     bad.append(str(csv))
                     break
+    def refuse(constant):
+        raise ValueError(constant)
     for sidecar in folder.rglob("*.json"):
-        text = sidecar.read_text(errors="replace")
-        if "NaN" in text or "Infinity" in text:
+        try:  # strict JSON: NaN, Infinity and -Infinity are not numbers there
+            json.loads(sidecar.read_text(errors="replace"), parse_constant=refuse)
+        except ValueError:
             bad.append(str(sidecar))
     return bad
 
@@ -210,7 +213,7 @@ def ctrl_c_campaign(n: int, fmus: Path, work: Path, seed: int) -> dict:
         proc = subprocess.Popen([sys.executable, "-m", "crankfmu", "run", str(scene), "--fmus",
                                  str(fmus), "--out", str(out), "--no-progress"], cwd=work,
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        time.sleep(rng.uniform(3.0, 60.0))  # after the ~2 s of loading: within the run
+        time.sleep(rng.uniform(5.0, 60.0))  # after the 2-4 s of loading: within the run
         finished = proc.poll() is not None
         proc.send_signal(signal.SIGINT)
         _, stderr = proc.communicate(timeout=120)

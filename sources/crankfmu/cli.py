@@ -123,12 +123,13 @@ def main(argv=None) -> int:
     """Exit status 0, 2 for every crankfmu error (`crankfmu.errors.CrankfmuError`: a bad scene,
     option or archive, a failed run), 130 for Ctrl-C; no traceback for anything a user can do."""
     from .errors import CrankfmuError
-    parser = build_parser()
-    args = parser.parse_args(argv)
     try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
         from .physics.base import ParameterError  # physics errors raised in this process
-    except ImportError:  # pragma: no cover
-        ParameterError = CrankfmuError
+    except KeyboardInterrupt:  # Ctrl-C while the commands are imported
+        print("error: interrupted (Ctrl-C)", file=sys.stderr)
+        return 130
     try:
         return args.func(args)
     except (CrankfmuError, ParameterError) as err:

@@ -235,9 +235,10 @@ def check_run_size(scene: "Scene", key: str = "[master].step") -> None:
     biggest = max(abs(scene.start_time), abs(scene.stop_time), 1.0)
     smallest, which = (m.min_step, "[master].min_step") if m.algorithm == "adaptive" else \
         (m.step, key)
-    if not (math.isfinite(span) and span > 0):
+    if not (math.isfinite(span) and span > 1e-13 * biggest):
         raise SceneError(scene.path, "[scene].stop_time", f"must exceed start_time = "
-                                                          f"{scene.start_time!r}")
+                                                          f"{scene.start_time!r} by more than "
+                                                          "the time's resolution")
     if not smallest > 1e-10 * biggest * 1e-3:  # 1e-13 relative: a step the time can resolve
         raise SceneError(scene.path, which, f"{smallest!r} s is below the time's resolution at "
                                             f"t = {biggest:g} s")
