@@ -77,10 +77,13 @@ def worker() -> None:
 
 
 class Worker:
+    tmp: Path | None = None  # the workers' TMPDIR: what a killed worker leaves goes with --work
+
     def __init__(self):
+        env = dict(os.environ, **({"TMPDIR": str(self.tmp)} if self.tmp else {}))
         self.proc = subprocess.Popen([sys.executable, __file__, "--worker"], stdin=subprocess.PIPE,
                                      stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
-                                     bufsize=1, cwd=ROOT, start_new_session=True)
+                                     bufsize=1, cwd=ROOT, start_new_session=True, env=env)
 
     def run(self, case: dict, timeout: float) -> dict:
         self.proc.stdin.write(json.dumps(case) + "\n")
@@ -100,6 +103,14 @@ class Worker:
                 return {"outcome": "crash", "detail": f"worker died: status {code}"}
             if line.startswith(MARK):
                 return json.loads(line[len(MARK):])
+
+    def retire(self) -> None:
+        """End of input: the worker exits and its atexit handlers remove its unpacked FMUs."""
+        try:
+            self.proc.stdin.close()
+            self.proc.wait(timeout=20)
+        except (OSError, subprocess.TimeoutExpired):
+            self.kill()
 
     def kill(self) -> None:
         try:
@@ -176,7 +187,7 @@ def run_cases(cases: list[dict], work: Path, fmus: Path, timeout: float, tally, 
             if fresh.returncode in (0, 2) and "Traceback" not in fresh.stderr:
                 outcome = "crash in worker only"
         elif w is not None and "FMU call failed" in result.get("detail", ""):
-            w.kill()  # pythonfmu 0.7.0's error path damaged this interpreter: a fresh worker
+            w.retire()  # pythonfmu 0.7.0's error path damaged this interpreter: a fresh worker
             w = None
         checks = []
         if _nonfinite(case_dir):
@@ -196,7 +207,7 @@ def run_cases(cases: list[dict], work: Path, fmus: Path, timeout: float, tally, 
             print(f"  {label}: {k + 1}/{len(cases)} in {time.monotonic() - start:.0f} s",
                   flush=True)
     if w is not None:
-        w.kill()
+        w.retire()
 
 
 # -- Ctrl-C ----------------------------------------------------------------------------------------
@@ -252,6 +263,8 @@ def main() -> int:
         fmus = work / "fmus"
         build_all(fmus)
     fmus = fmus.resolve()
+    Worker.tmp = work / "tmp"
+    Worker.tmp.mkdir(exist_ok=True)
     from fuzz.overrides import override_cases
     from fuzz.scenes import scene_cases
     from fuzz.ssp import ssp_cases
