@@ -28,6 +28,8 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
                    help="the iterative and adaptive masters' tolerance ([master].tolerance)")
     p.add_argument("--fmu-tolerance", type=float,
                    help="each FMU's internal relative tolerance ([master].fmu_tolerance)")
+    p.add_argument("--max-steps", type=int, help="the most communication steps the run may take "
+                   "([master].max_steps; default 10,000,000)")
     p.add_argument("--fmus", type=Path, help="folder of built FMUs (default fmus/ beside scenarios/)")
     p.add_argument("--plot", action="store_true", help="also write a PNG of the recorded variables")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -35,27 +37,33 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
 
 
 def load_with_options(args):
-    """The scene with command-line overrides applied (shared by run-like commands)."""
-    from .scenario.scene import SceneError, apply_overrides, load_scene
+    """The scene with command-line overrides applied (shared by run-like commands); every value
+    is checked as the same key in a scene file would be."""
+    from .errors import MAX_TIME
+    from .scenario.scene import (SceneError, _integer, _number, apply_overrides, check_run_size,
+                                 load_scene)
 
     scene = load_scene(args.scene)
     apply_overrides(scene, args.overrides)
     m = scene.master
     if args.stop_time is not None:
-        if args.stop_time <= scene.start_time:
+        scene.stop_time = _number(scene.path, "--stop-time", args.stop_time,
+                                  minimum=-MAX_TIME, maximum=MAX_TIME)
+        if scene.stop_time <= scene.start_time:
             raise SceneError(scene.path, "--stop-time", f"must exceed start_time = {scene.start_time}")
-        scene.stop_time = args.stop_time
     for key in ("step", "tolerance", "fmu_tolerance"):
         value = getattr(args, key, None)
         if value is not None:
-            if value <= 0:
-                raise SceneError(scene.path, f"--{key.replace('_', '-')}",
-                                 f"must be > 0, got {value}")
-            setattr(m, key, value)
+            setattr(m, key, _number(scene.path, f"--{key.replace('_', '-')}", value,
+                                    positive=True, maximum=None if key == "step" else 1.0))
+    if getattr(args, "max_steps", None) is not None:
+        m.max_steps = _integer(scene.path, "--max-steps", args.max_steps, minimum=1,
+                               maximum=10**12)
     if getattr(args, "algorithm", None):
         m.algorithm = args.algorithm
     if getattr(args, "extrapolation", None) is not None:
         m.extrapolation = args.extrapolation
+    check_run_size(scene, "--step" if getattr(args, "step", None) is not None else "[master].step")
     return scene
 
 
@@ -112,15 +120,24 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    from .cosim.runner import RunError
-    from .scenario.scene import SceneError
+    """Exit status 0, 2 for every crankfmu error (`crankfmu.errors.CrankfmuError`: a bad scene,
+    option or archive, a failed run), 130 for Ctrl-C; no traceback for anything a user can do."""
+    from .errors import CrankfmuError
+    try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        from .physics.base import ParameterError  # physics errors raised in this process
+    except KeyboardInterrupt:  # Ctrl-C while the commands are imported
+        print("error: interrupted (Ctrl-C)", file=sys.stderr)
+        return 130
     try:
         return args.func(args)
-    except (SceneError, RunError) as err:
+    except (CrankfmuError, ParameterError) as err:
         print(f"error: {err}", file=sys.stderr)
-        return 2
+        return getattr(err, "exit_status", 2)
+    except KeyboardInterrupt:  # Ctrl-C outside a run's stepping loop (loading, building)
+        print("error: interrupted (Ctrl-C)", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -2,7 +2,10 @@
 from __future__ import annotations
 
 import json
+import math
+import os
 import platform
+import tempfile
 from importlib import metadata
 from pathlib import Path
 
@@ -32,12 +35,37 @@ class Recorder:
         return self.rows[:, 1 + self.names.index(name)]
 
 
-def write_csv(path: Path, recorder: Recorder) -> None:
+def atomic_write(path: Path, write) -> None:
+    """Write through a temporary file in the same folder, then rename it onto `path`: a reader
+    (or a crash) sees the old file or the new one, never a half-written one."""
+    path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w") as f:
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as f:
+            write(f)
+        os.chmod(tmp, 0o666 & ~_umask())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def write_csv(path: Path, recorder: Recorder) -> None:
+    def write(f):
         f.write(",".join(["time"] + [f'"{n}"' for n in recorder.names]) + "\n")
         for row in recorder.rows:
             f.write(",".join(repr(float(v)) for v in row) + "\n")
+    atomic_write(path, write)
 
 
 def versions() -> dict:
@@ -50,8 +78,25 @@ def versions() -> dict:
     return out
 
 
+def _finite(value):
+    """The payload with NaN and infinities as null: strict JSON, and no non-finite number in a
+    written result (a failed run's statistics may hold them)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    if isinstance(value, np.generic):
+        return _finite(value.item())
+    if isinstance(value, np.ndarray):
+        return _finite(value.tolist())
+    return value
+
+
 def write_sidecar(path: Path, payload: dict) -> None:
-    path.write_text(json.dumps(payload, indent=2, default=float) + "\n")
+    text = json.dumps(_finite(payload), indent=2, default=float, allow_nan=False) + "\n"
+    atomic_write(path, lambda f: f.write(text))
 
 
 def plot(path: Path, recorder: Recorder, title: str) -> None:

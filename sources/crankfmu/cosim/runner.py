@@ -2,25 +2,48 @@
 from __future__ import annotations
 
 import math
+import signal
+import threading
 import time
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from fmpy.fmi1 import FMICallException
+from lxml import etree
 
-from ..scenario.scene import Scene, SceneError
+from ..errors import CrankfmuError, InterruptedRun
+from ..scenario.scene import Scene, SceneError, check_run_size
 from .fmu import FmuInstance, LogCollector
 from .masters import DivergenceError, make_master
 from .results import Recorder, plot, versions, write_csv, write_sidecar
-from .wiring import System, check_components, check_links, default_fmu_dir, resolve_fmu
+from .wiring import (System, check_components, check_links, check_loops, check_physics,
+                     default_fmu_dir, resolve_fmu)
 
 
-class RunError(RuntimeError):
-    """A run that stopped early; the rows computed so far were written to `csv`."""
+class RunError(CrankfmuError, RuntimeError):
+    """A run that stopped early; the rows computed so far were written to `csv` (beside an
+    earlier result of the same name, never over it: see `partial_paths`)."""
 
     def __init__(self, message: str, csv: Path | None):
         self.csv = csv
         super().__init__(message + (f" (results up to then: {csv})" if csv else ""))
+
+
+class RunInterrupted(RunError, InterruptedRun):
+    """Ctrl-C (SIGINT) stopped the run between two steps; partial results were written."""
+
+
+class NonFiniteValue(DivergenceError):
+    """A recorded value is NaN or infinite: the run stops before writing it."""
+
+    def __init__(self, time: float, component: str, variable: str, value: float):
+        super().__init__(time, component, variable, value)
+        self.args = (f"not finite at t = {time:.6g} s: {component}.{variable} = {value!r} "
+                     f"(recorded variable of component {component})",)
+
+    def __str__(self) -> str:
+        return self.args[0]
 
 
 @dataclass
@@ -47,8 +70,25 @@ class RunOptions:
 
 
 def load_fmus(scene: Scene, fmu_dir: Path, log: LogCollector) -> dict[str, FmuInstance]:
-    return {name: FmuInstance(name, resolve_fmu(scene, name, fmu_dir), log)
-            for name in scene.components}
+    fmus: dict[str, FmuInstance] = {}
+    for name in scene.components:
+        path = resolve_fmu(scene, name, fmu_dir)
+        try:
+            fmus[name] = FmuInstance(name, path, log)
+        except (OSError, ValueError, KeyError, IndexError, TypeError, AttributeError,
+                zipfile.BadZipFile, etree.LxmlError) as err:  # not an FMU fmpy can read
+            close_fmus(fmus)
+            raise SceneError(scene.path, f"[components.{name}].fmu",
+                             f"cannot load {path}: {type(err).__name__}: {err}") from None
+    return fmus
+
+
+def close_fmus(fmus: dict[str, FmuInstance]) -> None:
+    for fmu in fmus.values():
+        try:
+            fmu.terminate()
+        except Exception:  # an FMU that failed may refuse to terminate; results still count
+            pass
 
 
 def _setup(scene: Scene, fmus: dict[str, FmuInstance], log: LogCollector) -> None:
@@ -77,25 +117,77 @@ def _sample(recorder: Recorder, readers, t: float) -> None:
     for read, where in readers:
         for k, v in zip(where, read().tolist()):  # Python floats: cheaper than numpy scalars
             row[k] = v
+    if not math.isfinite(sum(row)):  # NaN or inf somewhere (or an overflowing sum): find it
+        for name, v in zip(recorder.names, row):
+            if not math.isfinite(v):
+                comp, var = name.split(".", 1)
+                raise NonFiniteValue(t, comp, var, v)
     recorder.add(t, row)
 
 
+def partial_paths(out: Path) -> tuple[Path, Path]:
+    """Where a failed run writes: `out` if nothing is there yet, else `<stem>.failed.csv`
+    beside it (and its sidecar), so a failed rerun never replaces a good result."""
+    sidecar = out.with_suffix(".json")
+    if not out.exists() and not sidecar.exists():
+        return out, sidecar
+    failed = out.with_name(f"{out.stem}.failed{out.suffix or '.csv'}")
+    return failed, failed.with_suffix(".json")
+
+
+class _Interrupt:
+    """SIGINT sets a flag that the stepping loop reads between macro steps: no
+    KeyboardInterrupt is ever raised inside an FMU call (pythonfmu runs the FMU's Python in
+    this interpreter, and a Python exception inside an FMU call damages it: the process
+    crashed later, at exit, in 3 of 5 tries before)."""
+
+    def __init__(self):
+        self.requested = False
+        self._previous = None
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.signal(signal.SIGINT, self._handle)
+        return self
+
+    def _handle(self, signum, frame) -> None:
+        self.requested = True
+
+    def __exit__(self, *exc) -> None:
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+
+
 def run_scene(scene: Scene, options: RunOptions | None = None) -> RunResult:
+    """Run the scene; a run that fails or is interrupted writes its rows so far (partial_paths)
+    and raises RunError (RunInterrupted for Ctrl-C)."""
     options = options or RunOptions()
+    check_run_size(scene)
     out = options.out or Path("results") / f"{scene.name}.csv"
     log = LogCollector(echo=options.verbose_log)
     fmus = load_fmus(scene, options.fmu_dir or default_fmu_dir(scene), log)
-    check_components(scene, fmus)
-    links = check_links(scene, fmus)
-    system = System(scene, fmus, links)
     try:
-        master = make_master(scene.master.algorithm, system, scene.master)
-    except ValueError as err:  # e.g. an FMU that cannot roll back, for a master that must
-        raise SceneError(scene.path, "[master]", str(err)) from None
-    recorder, readers = _recorder(scene, fmus)
+        check_components(scene, fmus)
+        links = check_links(scene, fmus)
+        check_physics(scene, fmus)
+        system = System(scene, fmus, links)
+        try:
+            master = make_master(scene.master.algorithm, system, scene.master)
+        except ValueError as err:  # e.g. an FMU that cannot roll back, for a master that must
+            raise SceneError(scene.path, "[master]", str(err)) from None
+        check_loops(scene, fmus, links, master)
+        recorder, readers = _recorder(scene, fmus)
+    except BaseException:
+        close_fmus(fmus)
+        raise
+    with _Interrupt() as interrupt:
+        return _run(scene, options, out, log, fmus, system, master, recorder, readers, interrupt)
+
+
+def _run(scene, options, out, log, fmus, system, master, recorder, readers, interrupt):
     h, t0 = scene.master.step, scene.start_time
     wall = time.perf_counter()
-    failure = None
+    failure = outcome = None
     step, t = 0, t0
     try:
         _setup(scene, fmus, log)
@@ -103,38 +195,46 @@ def run_scene(scene: Scene, options: RunOptions | None = None) -> RunResult:
         _sample(recorder, readers, t0)
         loop = _variable_steps if master.variable_step else _fixed_steps
         for step, t, t_new, record in loop(master, scene, options.progress):
+            if interrupt.requested:
+                break
             master.check_finite(t_new)
             if record:
                 _sample(recorder, readers, t_new)
+        if interrupt.requested:
+            failure, outcome = f"interrupted (Ctrl-C) at t = {master.time or t0:.6g} s", \
+                "interrupted"
     except DivergenceError as err:
-        failure = str(err)
+        failure, outcome = str(err), "failed"
     except FMICallException as err:
-        failure = _fmi_failure(err, fmus, log, master.time if master.time is not None else t)
+        failure, outcome = _fmi_failure(err, fmus, log, master.time if master.time is not None
+                                        else t), "failed"
+    except (ArithmeticError, ValueError, RuntimeError, OSError) as err:  # say it, keep the rows
+        failure, outcome = f"stopped near t = {master.time or t:.6g} s: " \
+                           f"{type(err).__name__}: {err}", "failed"
     finally:
         wall = time.perf_counter() - wall
-        for fmu in fmus.values():
-            try:
-                fmu.terminate()
-            except Exception:  # an FMU that failed may refuse to terminate; results still count
-                pass
-    write_csv(out, recorder)
-    sidecar = out.with_suffix(".json")
+        close_fmus(fmus)
+    if interrupt.requested and not failure:
+        failure, outcome = f"interrupted (Ctrl-C) at t = {master.time or t0:.6g} s", "interrupted"
+    csv, sidecar = partial_paths(out) if failure else (out, out.with_suffix(".json"))
+    write_csv(csv, recorder)
     statistics = master.statistics()
     m = scene.master
     write_sidecar(sidecar, {
         "scene": str(scene.path), "name": scene.name, "status": failure or "completed",
+        "outcome": outcome or "completed", "rows": recorder.count,
         "start_time": t0, "stop_time": scene.stop_time,
         "master": {"algorithm": m.algorithm, "step": h, "extrapolation": m.extrapolation,
                    "tolerance": m.tolerance, "fmu_tolerance": m.fmu_tolerance,
                    "max_iterations": m.max_iterations, "min_step": m.min_step,
-                   "max_step": m.max_step, "order": system.order},
+                   "max_step": m.max_step, "max_steps": m.max_steps, "order": system.order},
         "components": {n: {"fmu": str(f.path), "parameters": scene.components[n].parameters,
                            "effects": scene.components[n].effects} for n, f in fmus.items()},
         "versions": versions(), "wall_seconds": wall, "communication_steps": step,
         "statistics": statistics, "master_statistics": master.master_statistics(),
         "coupling_error": master.coupling_error(), **options.extra_sidecar})
     if failure:
-        raise RunError(failure, out)
+        raise (RunInterrupted if outcome == "interrupted" else RunError)(failure, csv)
     png = out.with_suffix(".png") if options.plot else None
     if png:
         plot(png, recorder, f"{scene.name}: {scene.master.algorithm}, step {h:g} s")

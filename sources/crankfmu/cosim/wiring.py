@@ -7,6 +7,7 @@ variables exist.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -77,15 +78,82 @@ def _check_variable(scene, key, fmu: FmuInstance, name: str, causalities: tuple[
 def check_components(scene: Scene, fmus: dict[str, FmuInstance]) -> None:
     for name, comp in scene.components.items():
         fmu = fmus[name]
-        for pname in comp.parameters:
-            _check_variable(scene, f"[components.{name}].parameters.{pname}", fmu, pname,
-                            ("parameter",))
+        for pname, value in comp.parameters.items():
+            key = f"[components.{name}].parameters.{pname}"
+            var = _check_variable(scene, key, fmu, pname, ("parameter",))
+            _check_value(scene, key, f"{name}.{pname}", var, value)
         known_effects = sorted(v[len("effect_"):] for v in fmu.variables if v.startswith("effect_"))
         for effect in comp.effects:
             if effect not in known_effects:
                 raise SceneError(scene.path, f"[components.{name}].effects",
                                  f"{effect!r} is not an effect of {comp.fmu}; effects: "
                                  f"{', '.join(known_effects) or '(none)'}")
+
+
+def check_physics(scene: Scene, fmus: dict[str, FmuInstance]) -> None:
+    """Impossible parameter values of catalog FMUs, refused before any FMU is instantiated,
+    with the physics model's own message (as the libcosim/ecos adapters do). Inside the FMU the
+    same check raises a Python exception in pythonfmu 0.7.0's binary, whose error path damages
+    the shared interpreter: after a few such failures a long-lived process crashes (measured:
+    a segmentation fault in garbage collection after some tens of failed runs in one process)."""
+    from ..physics.base import ParameterError
+    from ..physics.catalog import FMU_MODELS, physics_class
+    for name, comp in scene.components.items():
+        model = fmus[name].model_description.modelName
+        if model not in FMU_MODELS:
+            continue
+        key = f"[components.{name}].parameters"
+        effects = set(comp.effects)
+        values = {}
+        for k, v in comp.parameters.items():
+            if k.startswith("effect_"):  # an effect switched by its Boolean parameter
+                (effects.add if v else effects.discard)(k[len("effect_"):])
+            else:
+                values[k] = float(v)
+        try:
+            physics_class(model)(values, sorted(effects))
+        except (KeyError, TypeError):  # a model whose constructor differs: the FMU checks
+            continue
+        except ParameterError as err:
+            raise SceneError(scene.path, key, str(err)) from None
+        except (ArithmeticError, ValueError) as err:  # e.g. an overflow from 1e300
+            raise SceneError(scene.path, key, f"{model} cannot take these values: "
+                                              f"{type(err).__name__}: {err}") from None
+
+
+def _check_value(scene, key, ref: str, var, value) -> None:
+    """The value fits the parameter's type (a Boolean takes true/false, a Real a finite
+    number: `--set press.m5=true` is not 1 kg) and the range its modelDescription declares."""
+    if var.type == "Boolean":
+        if not isinstance(value, bool):
+            raise SceneError(scene.path, key, f"{ref} is a Boolean parameter: true or false, got "
+                                              f"{value!r}")
+        return
+    if var.type not in ("Real", "Integer"):
+        raise SceneError(scene.path, key, f"{ref} is of type {var.type}; crankfmu sets Real and "
+                                          "Boolean parameters only")
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+            not math.isfinite(value):
+        raise SceneError(scene.path, key, f"{ref} is a {var.type} parameter"
+                                          f"{f' [{var.unit}]' if var.unit else ''}: a finite "
+                                          f"number, got {value!r}")
+    if var.type == "Integer" and not float(value).is_integer():
+        raise SceneError(scene.path, key, f"{ref} is an Integer parameter, got {value!r}")
+    for bound, ok in (("min", lambda b: value >= b), ("max", lambda b: value <= b)):
+        limit = _float_or_none(getattr(var, bound, None))
+        if limit is not None and not ok(limit):
+            raise SceneError(scene.path, key, f"{ref} = {value!r} is outside its range: "
+                                              f"{bound} = {limit!r}"
+                                              f"{f' {var.unit}' if var.unit else ''} "
+                                              "(the FMU's modelDescription)")
+
+
+def _float_or_none(x) -> float | None:
+    try:
+        value = float(x) if x not in (None, "") else None
+    except (TypeError, ValueError):
+        return None
+    return value if value is not None and math.isfinite(value) else None
 
 
 def check_links(scene: Scene, fmus: dict[str, FmuInstance]) -> list[Link]:
@@ -111,6 +179,69 @@ def check_links(scene: Scene, fmus: dict[str, FmuInstance]) -> list[Link]:
         _check_variable(scene, "[record].variables", fmus[comp], var,
                         ("output", "input", "parameter", "local"))
     return links
+
+
+def feedthrough(fmu: FmuInstance) -> dict[str, set[str]]:
+    """output -> the inputs it depends on directly, from the modelDescription's
+    ModelStructure/Outputs. An output listed without a `dependencies` attribute, or not listed,
+    depends on every input (FMI 2.0, section 2.2.8)."""
+    md = fmu.model_description
+    inputs = {v.name for v in md.modelVariables if v.causality == "input"}
+    out: dict[str, set[str]] = {v.name: set(inputs) for v in md.modelVariables
+                                if v.causality == "output"}
+    for unknown in md.outputs or []:
+        name = unknown.variable.name
+        if unknown.dependencies is not None:
+            out[name] = {d.name for d in unknown.dependencies if d.name in inputs}
+    return out
+
+
+def algebraic_loops(fmus: dict[str, FmuInstance], links: list[Link]) -> list[list[str]]:
+    """Cycles of direct feedthrough through the connections: each as the list of variables
+    around it ("comp.output", "comp.input", ...). A cycle of connections is a loop only where
+    every component on it passes its input straight to the output that closes it."""
+    deps = {c: feedthrough(f) for c, f in fmus.items()}
+    succ: dict[str, list[str]] = {}
+    for l in links:  # output -> connected input
+        succ.setdefault(f"{l.source}.{l.source_var}", []).append(f"{l.target}.{l.target_var}")
+    connected_outputs = {f"{l.source}.{l.source_var}" for l in links}
+    for comp, table in deps.items():  # input -> output with feedthrough
+        for output, inputs in table.items():
+            if f"{comp}.{output}" in connected_outputs:
+                for i in inputs:
+                    succ.setdefault(f"{comp}.{i}", []).append(f"{comp}.{output}")
+    loops, state, stack = [], {}, []
+
+    def visit(node: str) -> None:  # depth-first search; a back edge closes a cycle
+        state[node] = 1
+        stack.append(node)
+        for nxt in succ.get(node, []):
+            if state.get(nxt) == 1:
+                loops.append(stack[stack.index(nxt):] + [nxt])
+            elif nxt not in state:
+                visit(nxt)
+        stack.pop()
+        state[node] = 2
+    for node in sorted(succ):
+        if node not in state:
+            visit(node)
+    return loops
+
+
+def check_loops(scene: Scene, fmus: dict[str, FmuInstance], links: list[Link], master) -> None:
+    """An algebraic loop (a cycle of direct feedthrough) has no explicit solution: a master that
+    steps each FMU once per step (Jacobi, Gauss-Seidel, adaptive) would run it with values one
+    step old and no error; refuse it and name the loop. The iterative master solves the loop
+    at every communication point (its fixed point satisfies it)."""
+    if getattr(master, "solves_algebraic_loops", False):
+        return
+    loops = algebraic_loops(fmus, links)
+    if loops:
+        raise SceneError(scene.path, "[[connections]]",
+                         f"algebraic loop (direct feedthrough all the way round, declared in the "
+                         f"FMUs' ModelStructure): {' -> '.join(loops[0])}; master "
+                         f"{master.name} cannot solve it: use algorithm = \"iterative\", or "
+                         "break the loop")
 
 
 class System:

@@ -3,7 +3,9 @@
     [scene]       name, description, start_time [s], stop_time [s]
     [master]      algorithm, step [s], extrapolation (0, 1, 2), order, fmu_tolerance (each FMU's
                   internal relative tolerance, via fmi2SetupExperiment), tolerance (the iterative
-                  and adaptive masters' own tolerance), max_iterations, min_step [s], max_step [s]
+                  and adaptive masters' own tolerance), max_iterations, min_step [s], max_step [s],
+                  max_steps (the most communication steps a run may take; default
+                  crankfmu.errors.MAX_STEPS: a step that would need more is refused up front)
     [components.NAME]  fmu = "DcServoMotor" (built FMU name) or "path/to/file.fmu",
                        parameters = {name = value}, effects = ["name", ...]
     [[connections]]    from = "comp.output", to = "comp.input"
@@ -29,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import MAX_NAME_LENGTH, MAX_STEPS, MAX_TIME, CrankfmuError
 from .swap import read_scene_table
 
 ALGORITHMS = ("gauss-seidel", "jacobi", "iterative", "adaptive")
@@ -36,7 +39,7 @@ TOP_LEVEL_KEYS = {"scene", "master", "components", "connections", "inputs", "rec
                   "analysis"}
 
 
-class SceneError(ValueError):
+class SceneError(CrankfmuError, ValueError):
     """A scene file problem; the message names the file and the key."""
 
     def __init__(self, path, key: str, message: str):
@@ -94,6 +97,7 @@ class Master:
     max_iterations: int = 20
     min_step: float = 1e-6
     max_step: float = 1e-2
+    max_steps: int = MAX_STEPS    # communication steps a run may take (checked before it starts)
 
 
 @dataclass
@@ -112,14 +116,61 @@ class Scene:
     raw: dict
 
 
-def _number(path, key, value, *, positive=False, minimum=None) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+def _number(path, key, value, *, positive=False, minimum=None, maximum=None) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise SceneError(path, key, f"must be a finite number, got {_show(value)}")
+    try:
+        value = float(value)  # a TOML integer beyond a float's range
+    except OverflowError:
+        raise SceneError(path, key, f"must be a finite number, got {_show(value)}") from None
+    if not math.isfinite(value):
         raise SceneError(path, key, f"must be a finite number, got {value!r}")
     if positive and value <= 0:
         raise SceneError(path, key, f"must be > 0, got {value!r}")
     if minimum is not None and value < minimum:
-        raise SceneError(path, key, f"must be >= {minimum}, got {value!r}")
-    return float(value)
+        raise SceneError(path, key, f"must be >= {minimum:g}, got {value!r}")
+    if maximum is not None and value > maximum:
+        raise SceneError(path, key, f"must be <= {maximum:g}, got {value!r}")
+    return value
+
+
+def _show(value, limit: int = 60) -> str:
+    """repr(value), shortened: error messages quote what the user gave, not all of it."""
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit] + f"... ({len(text)} characters)"
+
+
+def _integer(path, key, value, *, minimum: int, maximum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+            (isinstance(value, float) and not value.is_integer()):
+        raise SceneError(path, key, f"must be an integer, got {_show(value)}")
+    if not minimum <= value <= maximum:
+        raise SceneError(path, key, f"must be an integer from {minimum} to {maximum}, "
+                                    f"got {_show(value)}")
+    return int(value)
+
+
+def _list(path, key, value, what: str) -> list:
+    if not isinstance(value, list):
+        raise SceneError(path, key, f"must be a list of {what}, got {type(value).__name__} "
+                                    f"{_show(value)}")
+    return value
+
+
+def check_name(path, key, value, what: str = "name") -> str:
+    """A name that becomes a file name (results/<name>.csv) or an FMU instance name: a plain
+    name, never a path."""
+    if not isinstance(value, str) or not value:
+        raise SceneError(path, key, f"must be a non-empty string, got {_show(value)}")
+    if len(value) > MAX_NAME_LENGTH:
+        raise SceneError(path, key, f"a {what} has at most {MAX_NAME_LENGTH} characters, got "
+                                    f"{len(value)}")
+    bad = [c for c in value if c in '/\\' or ord(c) < 32 or ord(c) == 127]
+    if bad or value.startswith(".") or value != value.strip():
+        raise SceneError(path, key, f"{_show(value)} is not a plain {what}: no /, \\, control "
+                                    "characters, leading dot or surrounding spaces (it becomes a "
+                                    "file name)")
+    return value
 
 
 def _table(path, key, value) -> dict:
@@ -137,7 +188,7 @@ def _only_keys(path, key, table: dict, allowed: set[str]) -> None:
 
 def _variable_ref(path, key, value, components) -> str:
     if not isinstance(value, str) or value.count(".") < 1:
-        raise SceneError(path, key, f"must be \"component.variable\", got {value!r}")
+        raise SceneError(path, key, f"must be \"component.variable\", got {_show(value)}")
     comp = value.split(".", 1)[0]
     if comp not in components:
         raise SceneError(path, key, f"unknown component {comp!r}; components: "
@@ -149,40 +200,79 @@ def _parse_master(path, raw: dict) -> Master:
     m = Master()
     _only_keys(path, "[master]", raw, set(Master.__dataclass_fields__))
     if "algorithm" in raw:
-        if raw["algorithm"] not in ALGORITHMS:
+        if not isinstance(raw["algorithm"], str) or raw["algorithm"] not in ALGORITHMS:
             raise SceneError(path, "[master].algorithm",
-                             f"{raw['algorithm']!r} is not one of {', '.join(ALGORITHMS)}")
+                             f"{_show(raw['algorithm'])} is not one of {', '.join(ALGORITHMS)}")
         m.algorithm = raw["algorithm"]
-    for key in ("step", "tolerance", "fmu_tolerance", "min_step", "max_step"):
+    for key in ("step", "min_step", "max_step"):
         if key in raw:
             setattr(m, key, _number(path, f"[master].{key}", raw[key], positive=True))
+    for key in ("tolerance", "fmu_tolerance"):  # relative tolerances
+        if key in raw:
+            setattr(m, key, _number(path, f"[master].{key}", raw[key], positive=True,
+                                    maximum=1.0))
     if "extrapolation" in raw:
-        if raw["extrapolation"] not in (0, 1, 2) or isinstance(raw["extrapolation"], bool):
+        if isinstance(raw["extrapolation"], bool) or raw["extrapolation"] not in (0, 1, 2):
             raise SceneError(path, "[master].extrapolation",
-                             f"must be 0, 1 or 2, got {raw['extrapolation']!r}")
+                             f"must be 0, 1 or 2, got {_show(raw['extrapolation'])}")
         m.extrapolation = int(raw["extrapolation"])
     if "max_iterations" in raw:
-        m.max_iterations = int(_number(path, "[master].max_iterations", raw["max_iterations"],
-                                       positive=True))
+        m.max_iterations = _integer(path, "[master].max_iterations", raw["max_iterations"],
+                                    minimum=1, maximum=10_000)
+    if "max_steps" in raw:
+        m.max_steps = _integer(path, "[master].max_steps", raw["max_steps"], minimum=1,
+                               maximum=10**12)
     if "order" in raw:
-        m.order = list(raw["order"])
+        m.order = _list(path, "[master].order", raw["order"], "component names")
     return m
+
+
+def check_run_size(scene: "Scene", key: str = "[master].step") -> None:
+    """The run fits the step-count limit and its steps are not lost in the time's rounding;
+    checked after every override (command line, sweeps), before anything is loaded or run."""
+    m, span = scene.master, scene.stop_time - scene.start_time
+    limit = m.max_steps
+    biggest = max(abs(scene.start_time), abs(scene.stop_time), 1.0)
+    smallest, which = (m.min_step, "[master].min_step") if m.algorithm == "adaptive" else \
+        (m.step, key)
+    if not (math.isfinite(span) and span > 1e-13 * biggest):
+        raise SceneError(scene.path, "[scene].stop_time", f"must exceed start_time = "
+                                                          f"{scene.start_time!r} by more than "
+                                                          "the time's resolution")
+    if not smallest > 1e-10 * biggest * 1e-3:  # 1e-13 relative: a step the time can resolve
+        raise SceneError(scene.path, which, f"{smallest!r} s is below the time's resolution at "
+                                            f"t = {biggest:g} s")
+    count = span / smallest
+    if not count <= limit:
+        raise SceneError(scene.path, which, f"{smallest!r} s from start_time {scene.start_time:g} "
+                         f"to stop_time {scene.stop_time:g} s means up to {count:.3g} "
+                         f"communication steps, more than the limit of {limit} "
+                         "([master].max_steps or --max-steps raises it)")
+    if m.algorithm == "adaptive" and m.min_step > m.max_step:
+        raise SceneError(scene.path, "[master].min_step", f"{m.min_step!r} exceeds max_step = "
+                                                          f"{m.max_step!r}")
 
 
 def _parse_component(path, name: str, raw) -> Component:
     key = f"[components.{name}]"
     raw = _table(path, key, raw)
     _only_keys(path, key, raw, {"fmu", "parameters", "effects", "description"})
-    if not isinstance(raw.get("fmu"), str):
+    check_name(path, key, name, "component name")
+    if "." in name:
+        raise SceneError(path, key, f"a component name holds no dot (\"{name}.x\" would be "
+                                    "ambiguous)")
+    if not isinstance(raw.get("fmu"), str) or not raw["fmu"] or "\0" in raw["fmu"]:
         raise SceneError(path, f"{key}.fmu", "required: the FMU's model name (e.g. "
                                              "\"DcServoMotor\") or a path to a .fmu file")
     params = _table(path, f"{key}.parameters", raw.get("parameters", {}))
     for pname, value in params.items():
         if not isinstance(value, bool):
-            _number(path, f"{key}.parameters.{pname}", value)
+            params[pname] = _number(path, f"{key}.parameters.{pname}", value)
     effects = raw.get("effects", [])
     if not isinstance(effects, list) or not all(isinstance(e, str) for e in effects):
         raise SceneError(path, f"{key}.effects", "must be a list of effect names")
+    if not isinstance(raw.get("description", ""), str):
+        raise SceneError(path, f"{key}.description", "must be a string")
     return Component(name, raw["fmu"], dict(params), list(effects))
 
 
@@ -195,7 +285,7 @@ def _parse_input(path, target: str, raw) -> InputSignal:
                                     f"got {raw!r}")
     _only_keys(path, key, raw, {"table", "interpolation"})
     rows = raw.get("table")
-    if not isinstance(rows, list) or not rows or \
+    if not isinstance(rows, list) or not rows or len(rows) > 1_000_000 or \
             not all(isinstance(r, list) and len(r) == 2 for r in rows):
         raise SceneError(path, f"{key}.table", "must be a list of [time, value] pairs")
     times = [_number(path, f"{key}.table", r[0]) for r in rows]
@@ -212,10 +302,17 @@ def parse_scene(path: Path, data: dict) -> Scene:
     _only_keys(path, "(top level)", data, TOP_LEVEL_KEYS)
     head = _table(path, "[scene]", data.get("scene", {}))
     _only_keys(path, "[scene]", head, {"name", "description", "start_time", "stop_time"})
-    start = _number(path, "[scene].start_time", head.get("start_time", 0.0))
+    name = check_name(path, "[scene].name", head["name"], "scene name") \
+        if head.get("name") is not None else check_name(path, "(file name)", Path(path).stem,
+                                                         "scene name")
+    if not isinstance(head.get("description", ""), str):
+        raise SceneError(path, "[scene].description", "must be a string")
+    start = _number(path, "[scene].start_time", head.get("start_time", 0.0), minimum=-MAX_TIME,
+                    maximum=MAX_TIME)
     if "stop_time" not in head:
         raise SceneError(path, "[scene].stop_time", "required: the end of the run in s")
-    stop = _number(path, "[scene].stop_time", head["stop_time"])
+    stop = _number(path, "[scene].stop_time", head["stop_time"], minimum=-MAX_TIME,
+                   maximum=MAX_TIME)
     if stop <= start:
         raise SceneError(path, "[scene].stop_time", f"must exceed start_time = {start}")
     comps_raw = _table(path, "[components]", data.get("components", {}))
@@ -223,7 +320,8 @@ def parse_scene(path: Path, data: dict) -> Scene:
         raise SceneError(path, "[components]", "a scene needs at least one component")
     components = {n: _parse_component(path, n, c) for n, c in comps_raw.items()}
     connections = []
-    for k, c in enumerate(data.get("connections", [])):
+    for k, c in enumerate(_list(path, "[[connections]]", data.get("connections", []),
+                                "tables {from = \"comp.output\", to = \"comp.input\"}")):
         key = f"[[connections]] #{k + 1}"
         c = _table(path, key, c)
         _only_keys(path, key, c, {"from", "to"})
@@ -242,16 +340,27 @@ def parse_scene(path: Path, data: dict) -> Scene:
     rec = _table(path, "[record]", data.get("record", {}))
     _only_keys(path, "[record]", rec, {"variables", "interval"})
     record = [_variable_ref(path, "[record].variables", v, components)
-              for v in rec.get("variables", [])]
+              for v in _list(path, "[record].variables", rec.get("variables", []),
+                             "\"component.variable\" names")]
+    for ref in record:
+        if record.count(ref) > 1:
+            raise SceneError(path, "[record].variables", f"{ref} is listed more than once")
     interval = rec.get("interval")
     if interval is not None:
         interval = _number(path, "[record].interval", interval, positive=True)
     master = _parse_master(path, _table(path, "[master]", data.get("master", {})))
-    for name in master.order:
-        if name not in components:
-            raise SceneError(path, "[master].order", f"unknown component {name!r}")
-    return Scene(Path(path), head.get("name", Path(path).stem), head.get("description", ""),
-                 start, stop, master, components, connections, inputs, record, interval, data)
+    for comp in master.order:
+        if not isinstance(comp, str) or comp not in components:
+            raise SceneError(path, "[master].order", f"unknown component {_show(comp)}; "
+                                                     f"components: {', '.join(components)}")
+        if master.order.count(comp) > 1:
+            raise SceneError(path, "[master].order", f"{comp!r} is listed more than once (each "
+                                                     "component steps once per step)")
+    _table(path, "[analysis]", data.get("analysis", {}))
+    scene = Scene(Path(path), name, head.get("description", ""), start, stop, master,
+                  components, connections, inputs, record, interval, data)
+    check_run_size(scene)
+    return scene
 
 
 def load_scene(path) -> Scene:
@@ -263,15 +372,19 @@ def load_scene(path) -> Scene:
 
 
 def apply_overrides(scene: Scene, assignments: list[str]) -> None:
-    """--set comp.param=value (numbers, true/false) on the loaded scene."""
+    """--set comp.param=value (finite numbers, true/false) on the loaded scene; whether the
+    parameter exists and takes that type is checked against the FMU (crankfmu.cosim.wiring)."""
     for text in assignments:
+        key = f"--set {_show(text)[1:-1]}"
         if "=" not in text or "." not in text.split("=", 1)[0]:
-            raise SceneError(scene.path, f"--set {text}", "must look like comp.param=value")
+            raise SceneError(scene.path, key, "must look like comp.param=value")
         ref, value = text.split("=", 1)
         comp, param = ref.split(".", 1)
         if comp not in scene.components:
-            raise SceneError(scene.path, f"--set {text}", f"unknown component {comp!r}; "
-                                                          f"components: {', '.join(scene.components)}")
+            raise SceneError(scene.path, key, f"unknown component {_show(comp)}; "
+                                              f"components: {', '.join(scene.components)}")
+        if not param:
+            raise SceneError(scene.path, key, "no parameter name after the component")
         lowered = value.strip().lower()
         if lowered in ("true", "false"):
             parsed: float | bool = lowered == "true"
@@ -279,6 +392,8 @@ def apply_overrides(scene: Scene, assignments: list[str]) -> None:
             try:
                 parsed = float(value)
             except ValueError:
-                raise SceneError(scene.path, f"--set {text}",
-                                 f"value {value!r} is not a number or true/false") from None
+                raise SceneError(scene.path, key, f"value {_show(value)} is not a number or "
+                                                  "true/false") from None
+            if not math.isfinite(parsed):
+                raise SceneError(scene.path, key, f"value {_show(value)} is not a finite number")
         scene.components[comp].parameters[param] = parsed

@@ -21,6 +21,7 @@ from pathlib import Path
 from lxml import etree
 
 from .. import __version__
+from ..errors import MAX_STEPS
 from ..fmi.units import base_unit_attributes
 from ..scenario.scene import Scene
 from ..slaves.base import DEFAULT_TOLERANCE
@@ -251,6 +252,8 @@ def scene_annotation(scene: Scene):
         "tolerance": number(m.tolerance), "fmu_tolerance": number(m.fmu_tolerance),
         "max_iterations": str(m.max_iterations), "min_step": number(m.min_step),
         "max_step": number(m.max_step)})
+    if m.max_steps != MAX_STEPS:  # only when raised or lowered: default files stay as they were
+        master.set("max_steps", str(m.max_steps))
     for name in m.order:
         etree.SubElement(master, q("crankfmu", "Order"), component=name)
     record = etree.SubElement(node, q("crankfmu", "Record"))

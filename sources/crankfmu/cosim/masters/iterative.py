@@ -31,6 +31,7 @@ CONTRACTION = 0.25  # a Newton iteration must cut the residual by this factor, e
 class Iterative(Master):
     name = "iterative"
     needs_rollback = True
+    solves_algebraic_loops = True  # its converged step satisfies the loop at t + h
     uses_error_scale = True
 
     def __init__(self, system, settings):

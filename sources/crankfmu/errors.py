@@ -1,0 +1,28 @@
+"""The one base of crankfmu's user-facing errors.
+
+Every error a user can cause with what they pass in (a scene file, an SSP archive, a `--set`
+value, a command-line option) or that ends a run early derives from `CrankfmuError`, and its
+message says what is wrong and where (file, key, what is allowed; or time, component and
+variable). `crankfmu.cli.main` maps it to exit status 2 with `error: <message>`, and an
+interrupted run (`RunInterrupted`, Ctrl-C) to 130: no traceback for anything a user can do.
+"""
+from __future__ import annotations
+
+# Limits on what a scene may ask for; each is named in the error that enforces it.
+MAX_STEPS = 10_000_000          # communication steps of one run ([master].max_steps raises it)
+MAX_SCENE_FILE_BYTES = 4 << 20  # a scene file (TOML) read into memory
+MAX_NAME_LENGTH = 100           # a scene name becomes a file name: results/<name>.csv
+MAX_TIME = 1e12                 # |start_time|, |stop_time| [s]: beyond this a step is lost in
+                                # the time's rounding
+
+
+class CrankfmuError(Exception):
+    """Base of the errors crankfmu reports to a user (exit status 2 from the command line)."""
+
+    exit_status = 2
+
+
+class InterruptedRun(CrankfmuError):
+    """Base of a run stopped by the user (Ctrl-C): exit status 130."""
+
+    exit_status = 130

@@ -1,0 +1,74 @@
+"""A quick seeded subset of the fuzz campaign (scripts/fuzz.py runs the full one): one scene
+file of each of the 56 kinds, the SSP archives of the cheap kinds, and a sample of `--set`
+values, each through `crankfmu run` in this process. Every case must end with exit 0 or a clear
+error (exit 2), write no NaN or inf, and write nothing outside its results folder."""
+from __future__ import annotations
+
+import math
+import random
+import time
+from pathlib import Path
+
+import pytest
+
+from crankfmu.cli import main
+from fuzz.overrides import override_cases
+from fuzz.scenes import KINDS, ROTOR, TEXT_KINDS, scene_cases, write_case
+from fuzz.ssp import ssp_cases
+
+SEED = 16
+SLOW_SSP_KINDS = {"fmu_entry_huge", "many_entries", "ssd_huge", "external_ssv_huge"}
+
+
+@pytest.fixture(scope="module")
+def fuzz_fmus(fmu_dir) -> Path:
+    from crankfmu.fmi.build import build_all
+    build_all(fmu_dir, ["Rotor", "ShaftRotor"])  # beside the session's motor and press
+    return fmu_dir
+
+
+def run_case(case: dict, folder: Path, fmus: Path, monkeypatch, capsys) -> tuple[int, str]:
+    work = folder / case["id"]
+    write_case({**case, "files": {f"work/{n}": d for n, d in case["files"].items()}}, work)
+    monkeypatch.chdir(work / "work")
+    status = main(["run", case["scene"], "--fmus", str(fmus), "--no-progress",
+                   *case.get("args", [])])
+    err = capsys.readouterr().err
+    assert status in (0, 2), (case["kind"], status, err)
+    assert status == 0 or err.startswith("error: "), (case["kind"], err)
+    for csv in (work / "work").rglob("*.csv"):
+        for line in csv.read_text().splitlines()[1:]:
+            assert all(math.isfinite(float(x)) for x in line.split(",")), (case["kind"], csv)
+        assert csv.parent.name == "results", (case["kind"], csv)  # nowhere else
+    for evil in case.get("evil", []):
+        path = Path(evil) if evil.startswith("/") else work / "work" / evil
+        assert not path.exists() or path.resolve().parent == (work / "work" / "results").resolve()
+    return status, err
+
+
+def test_one_scene_file_of_each_kind(tmp_path, fuzz_fmus, monkeypatch, capsys):
+    start = time.monotonic()
+    cases = scene_cases(SEED, len(KINDS) + len(TEXT_KINDS))
+    statuses = [run_case(c, tmp_path, fuzz_fmus, monkeypatch, capsys)[0] for c in cases]
+    assert len({c["kind"] for c in cases}) >= 30 and statuses.count(2) > len(cases) // 2
+    print(f"{len(cases)} scene cases in {time.monotonic() - start:.1f} s")
+
+
+def test_hostile_ssp_archives(tmp_path, fuzz_fmus, monkeypatch, capsys):
+    from crankfmu.scenario import load_scene
+    from crankfmu.ssp import export_ssp
+    (tmp_path / "rotor.toml").write_text(ROTOR)
+    base = export_ssp(load_scene(tmp_path / "rotor.toml"), tmp_path / "rotor.ssp",
+                      fuzz_fmus).read_bytes()
+    kinds = 40 - len(SLOW_SSP_KINDS)  # the slow ones (100s of MiB to compress): scripts/fuzz.py
+    cases = ssp_cases(SEED, kinds, base, skip=SLOW_SSP_KINDS)
+    for case in cases:
+        run_case(case, tmp_path, fuzz_fmus, monkeypatch, capsys)
+    assert len({c["kind"] for c in cases}) == kinds >= 30
+
+
+def test_a_sample_of_set_values(tmp_path, fuzz_fmus, monkeypatch, capsys):
+    cases = override_cases(fuzz_fmus, models=["Rotor", "ShaftRotor", "StephensonPress"])
+    sample = random.Random(SEED).sample(cases, 12)
+    for case in sample:
+        run_case(case, tmp_path, fuzz_fmus, monkeypatch, capsys)
