@@ -10,6 +10,8 @@ here (the same press may be driven through different components):
     drive_power  = "motor.P_shaft"      # W, the motor's shaft power: energy per stroke
     load_torque  = "press.M_C"          # N m, optional: the press's resistance moment
     from_time    = 0.5                  # s, optional (default start_time): skip a run-up
+    events       = ["drive.E_brake_b", "drive.n_events"]   # optional, hybrid scenes: recorded
+                                        # variables reported at the run's end (a sweep's columns)
 
 Strokes: the crank angle at from_time is phi0; stroke k ends when the crank angle first reaches
 phi0 + 2 pi k. The metrics use the complete strokes only, the window [from_time, end of the last
@@ -34,6 +36,7 @@ import numpy as np
 ROLES = ("crank_angle", "crank_speed", "drive_torque", "drive_power")
 OPTIONAL = ("load_torque",)
 NUMBERS = ("from_time",)
+LISTS = ("events",)
 
 
 @dataclass
@@ -51,10 +54,10 @@ def analysis_roles(scene) -> dict:
     if not isinstance(raw, dict):
         raise SceneError(scene.path, "[analysis]", "required by compare: name the variables "
                          f"for {', '.join(ROLES)} (optional: {', '.join(OPTIONAL + NUMBERS)})")
-    unknown = set(raw) - set(ROLES + OPTIONAL + NUMBERS)
+    unknown = set(raw) - set(ROLES + OPTIONAL + NUMBERS + LISTS)
     if unknown:
         raise SceneError(scene.path, f"[analysis].{sorted(unknown)[0]}",
-                         f"unknown key; allowed: {', '.join(ROLES + OPTIONAL + NUMBERS)}")
+                         f"unknown key; allowed: {', '.join(ROLES + OPTIONAL + NUMBERS + LISTS)}")
     out = {}
     for role in ROLES + OPTIONAL:
         if role in raw:
@@ -64,7 +67,31 @@ def analysis_roles(scene) -> dict:
             raise SceneError(scene.path, f"[analysis].{role}", "required by compare: the "
                              "recorded variable (\"component.variable\") with this role")
     out["from_time"] = float(raw.get("from_time", scene.start_time))
+    events = raw.get("events", [])
+    if not isinstance(events, list):
+        raise SceneError(scene.path, "[analysis].events", "must be a list of "
+                         "\"component.variable\" (values reported at the run's end)")
+    out["events"] = [_variable_ref(scene.path, "[analysis].events", v, scene.components)
+                     for v in events]
     return out
+
+
+def role_variables(roles: dict) -> dict:
+    """role -> recorded variable, without from_time and events."""
+    return {r: v for r, v in roles.items() if r not in NUMBERS + LISTS}
+
+
+def record_analysis_variables(scene, roles: dict) -> None:
+    """Add the analysis variables (roles and events) to what `scene` records."""
+    scene.record = list(dict.fromkeys(scene.record + list(role_variables(roles).values())
+                                      + list(roles.get("events", []))))
+
+
+def series_from_arrays(label: str, names: list, rows: np.ndarray, roles: dict) -> Series:
+    """The role series of a run from its recorded arrays (time + `names` columns)."""
+    return Series(label, rows[:, 0].copy(),
+                  {r: rows[:, 1 + names.index(v)].copy() for r, v in role_variables(roles).items()},
+                  roles["from_time"])
 
 
 def run_for_comparison(scene, label: str, out_dir: Path, options) -> Series:
@@ -72,12 +99,10 @@ def run_for_comparison(scene, label: str, out_dir: Path, options) -> Series:
     from dataclasses import replace
     from .cosim.runner import run_scene
     roles = analysis_roles(scene)
-    names = {r: v for r, v in roles.items() if r != "from_time"}
-    scene.record = list(dict.fromkeys(scene.record + list(names.values())))
+    record_analysis_variables(scene, roles)
     result = run_scene(scene, replace(options, out=out_dir / f"{label}.csv"))
     rec = result.recorder
-    return Series(label, rec.rows[:, 0].copy(),
-                  {r: rec.column(v).copy() for r, v in names.items()}, roles["from_time"])
+    return series_from_arrays(label, rec.names, rec.rows, roles)
 
 
 def stroke_ends(time: np.ndarray, angle: np.ndarray, t0: float) -> list[float]:
