@@ -371,7 +371,7 @@ def plot_sweep(path: Path, table: SweepTable, title: str) -> Path:
             ax.tick_params(labelsize=7)
         axes[-1, j].set_xlabel(p)
     fig.suptitle(f"{title}: {len(table.rows)} runs, {int(ok.sum())} completed", fontsize=10)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 0.98))
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
