@@ -94,6 +94,33 @@ def series_from_arrays(label: str, names: list, rows: np.ndarray, roles: dict) -
                   roles["from_time"])
 
 
+def _run_both(executor, scenes, out_dir: Path, options) -> list[Series]:
+    """Both runs through `executor`; this process writes their CSVs and sidecars to out_dir.
+    A run that stops early raises RunError here, as run_scene does on the serial path."""
+    from .cosim.runner import RunError
+    from .studies.executor import RunTask, write_run_files
+
+    tasks, roles = [], []
+    for scene, label in scenes:
+        r = analysis_roles(scene)
+        record_analysis_variables(scene, r)
+        roles.append(r)
+        tasks.append(RunTask(label, scene))
+    outputs = executor.run(tasks, options.fmu_dir, progress=options.progress, label="compare")
+    paths = getattr(executor, "fmu_files", {})
+    series = []
+    for task, output, r in zip(tasks, outputs, roles):
+        csv = out_dir / f"{task.key}.csv"
+        if output.sidecar:
+            write_run_files(output, csv, {c: paths.get(d) for c, (d, _) in task.fmus.items()})
+        if output.status == "failed":
+            raise RunError(output.reason, csv)
+        if output.status != "completed":
+            raise RunError(f"{task.key}: {output.status}: {output.reason}", None)
+        series.append(series_from_arrays(task.key, output.names, output.rows, r))
+    return series
+
+
 def run_for_comparison(scene, label: str, out_dir: Path, options) -> Series:
     """Run `scene` (recording its analysis variables too) and return its role series."""
     from dataclasses import replace
@@ -211,16 +238,21 @@ def overlay_plot(path: Path, a: Series, b: Series, title: str) -> None:
     plt.close(fig)
 
 
-def compare_scenes(scene_a, scene_b, out_dir: Path, options) -> dict:
-    """Run both scenes into out_dir; write compare.csv and compare.png; return the results."""
+def compare_scenes(scene_a, scene_b, out_dir: Path, options, executor=None) -> dict:
+    """Run both scenes into out_dir; write compare.csv and compare.png; return the results.
+    With an `executor` (crankfmu.studies.executor) both runs go through it (in parallel on a
+    pool or cluster); without one they run in this process one after the other. Same numbers."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     la, lb = scene_a.name, scene_b.name
     if la == lb:
         la, lb = f"A_{la}", f"B_{lb}"
     analysis_roles(scene_a), analysis_roles(scene_b)  # fail before running anything
-    a = run_for_comparison(scene_a, la, out_dir, options)
-    b = run_for_comparison(scene_b, lb, out_dir, options)
+    if executor is None:
+        a = run_for_comparison(scene_a, la, out_dir, options)
+        b = run_for_comparison(scene_b, lb, out_dir, options)
+    else:
+        a, b = _run_both(executor, [(scene_a, la), (scene_b, lb)], out_dir, options)
     rows = compare_table(a, b)
     write_table(out_dir / "compare.csv", rows, la, lb)
     overlay_plot(out_dir / "compare.png", a, b, f"{la} (A) vs {lb} (B)")
