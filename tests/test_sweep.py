@@ -17,6 +17,7 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from crankfmu.studies.sweep import SweepError, expand, parse_vary, read_table, sweep
@@ -65,9 +66,14 @@ VARY = ["r.J=0.3:0.9:4", "r.d=0.2,0.6,1.0"]  # 12 runs
 
 def same_table(a, b) -> None:
     """Every column but wall time equal, floats identical (NaN where NaN)."""
-    assert a.columns == b.columns and len(a.rows) == len(b.rows)
-    for ra, rb in zip(a.rows, b.rows):
-        for c in a.columns:
+    assert a.columns == b.columns
+    same_rows(a.columns, a.rows, b.rows)
+
+
+def same_rows(columns, rows_a, rows_b) -> None:
+    assert len(rows_a) == len(rows_b)
+    for ra, rb in zip(rows_a, rows_b):
+        for c in columns:
             if c == "wall_seconds":
                 continue
             va, vb = ra[c], rb[c]
@@ -211,3 +217,43 @@ def test_killed_dask_worker_loses_nothing(tmp_path, rotor_fmu_dir, cluster):
     assert info.get("killed") == pids[0]
     assert [r["status"] for r in table.rows] == ["completed"] * 4
     same_table(serial, table)
+
+
+def test_cli_on_a_scheduler_address(tmp_path, rotor_fmu_dir, cluster, capsys):
+    """`crankfmu sweep --scheduler tcp://127.0.0.1:PORT` (the address, not a client object)."""
+    from crankfmu.cli import main
+
+    scene = spinner(tmp_path, stop=2.0)
+    out = tmp_path / "cli"
+    assert main(["sweep", str(scene), "--vary", "r.J=0.3,0.6", "--vary", "r.d=0.2:1.0:2",
+                 "--out", str(out), "--scheduler", cluster.scheduler.address,
+                 "--fmus", str(rotor_fmu_dir), "--no-progress"]) == 0
+    assert "4 runs (4 executed now, 0 kept" in capsys.readouterr().out
+    serial = sweep(scene, ["r.J=0.3,0.6", "r.d=0.2:1.0:2"], tmp_path / "serial", jobs=1,
+                   fmu_dir=rotor_fmu_dir, progress=False, plot=False)
+    header, rows = read_table(out / "sweep.csv")
+    assert header == serial.columns
+    same_rows(header, rows, serial.rows)
+    assert (out / "sweep.png").is_file()
+
+
+@pytest.fixture(scope="module")
+def hybrid_fmus(tmp_path_factory):
+    from crankfmu.fmi.build import build_all
+    dest = tmp_path_factory.mktemp("hybrid_fmus")
+    build_all(dest, ["DcServoMotor", "StephensonPress", "InductionMotor", "PlanetaryClutchDrive"])
+    return dest
+
+
+def test_hybrid_scene_reports_its_event_figures(tmp_path, hybrid_fmus):
+    """The conventional press ([analysis].events): brake energies and the number of mode events
+    at the run's end are columns; a stronger ring brake engages faster and dissipates less."""
+    table = sweep(ROOT / "scenarios/conventional_press.toml", ["drive.Mp_b=800,1200"],
+                  tmp_path / "out", stop_time=0.6, jobs=1, fmu_dir=hybrid_fmus, progress=False,
+                  plot=False)
+    for name in ("drive.E_brake_b", "drive.E_brake_h", "drive.n_events"):
+        assert name in table.columns
+    assert [r["status"] for r in table.rows] == ["completed", "completed"]
+    E = table.column("drive.E_brake_b")
+    assert np.all(E > 0) and E[1] != E[0]
+    assert np.all(table.column("drive.n_events") >= 1)
