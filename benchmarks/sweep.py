@@ -6,7 +6,9 @@ The sweep varies the flywheel (4 values) and the forging force (3 values) of
 scenarios/servo_press.toml, each run --stop-time seconds of simulated time (default 1 s, the
 analysis window from 0.5 s). Each repetition runs the two settings back to back into fresh
 folders, timed around `crankfmu.sweep` (pool start-up included; the FMUs are built beforehand),
-and checks that both tables are equal (wall time aside). Prints each repetition and the medians.
+and checks that both tables are equal (wall time aside). Prints each repetition (with the load
+average before it: on a shared machine other work takes cores, and with the kernel's autogroup
+scheduling a session gets its share whatever its process count) and the medians.
 """
 from __future__ import annotations
 
@@ -44,6 +46,7 @@ def main() -> int:
           f"load average {os.getloadavg()[0]:.2f} at start")
     times = {j: [] for j in args.jobs}
     for k in range(args.repeat):
+        load = os.getloadavg()[0]
         tables = {}
         for jobs in args.jobs:
             with tempfile.TemporaryDirectory() as tmp:
@@ -60,7 +63,7 @@ def main() -> int:
         j1, j2 = args.jobs
         print(f"repeat {k + 1}: --jobs {j1} {times[j1][-1]:.2f} s, --jobs {j2} "
               f"{times[j2][-1]:.2f} s, ratio {times[j1][-1] / times[j2][-1]:.2f}; "
-              f"{ok}/12 completed, tables equal: {same}")
+              f"{ok}/12 completed, tables equal: {same}; load average {load:.2f} before")
     j1, j2 = args.jobs
     m1, m2 = statistics.median(times[j1]), statistics.median(times[j2])
     print(f"median of {args.repeat}: --jobs {j1} {m1:.2f} s, --jobs {j2} {m2:.2f} s, "

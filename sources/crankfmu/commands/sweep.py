@@ -6,8 +6,16 @@ from __future__ import annotations
 from pathlib import Path
 
 
+def _jobs(text: str) -> int:
+    import argparse
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value
+
+
 def add_executor_options(p, what: str = "runs") -> None:
-    p.add_argument("--jobs", type=int, default=None,
+    p.add_argument("--jobs", type=_jobs, default=None,
                    help=f"local worker processes for the {what} (default: the number of cores; "
                         "1 runs them one after another in this process)")
     p.add_argument("--scheduler", metavar="ADDRESS",
