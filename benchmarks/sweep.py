@@ -44,30 +44,42 @@ def main() -> int:
         resolve_fmu(scene, name, ROOT / "fmus")
     print(f"servo press, 12 runs of {args.stop_time:g} s, {os.cpu_count()} cores, "
           f"load average {os.getloadavg()[0]:.2f} at start")
+    import resource
+
+    def cpu() -> float:
+        own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(
+            resource.RUSAGE_CHILDREN)
+        return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
     times = {j: [] for j in args.jobs}
+    cpus = {j: [] for j in args.jobs}
+    ratios = []
     for k in range(args.repeat):
         load = os.getloadavg()[0]
         tables = {}
         for jobs in args.jobs:
             with tempfile.TemporaryDirectory() as tmp:
-                t = time.perf_counter()
+                t, c = time.perf_counter(), cpu()
                 tables[jobs] = crankfmu.sweep(scene_path, VARY, Path(tmp) / "out", jobs=jobs,
                                               stop_time=args.stop_time, progress=False,
                                               plot=False)
                 times[jobs].append(time.perf_counter() - t)
+                cpus[jobs].append(cpu() - c)
         a, b = (tables[j] for j in args.jobs)
         same = all({c: ra[c] for c in a.columns if c != "wall_seconds"}
                    == {c: rb[c] for c in a.columns if c != "wall_seconds"}
                    for ra, rb in zip(a.rows, b.rows))
         ok = sum(r["status"] == "completed" for r in a.rows)
         j1, j2 = args.jobs
-        print(f"repeat {k + 1}: --jobs {j1} {times[j1][-1]:.2f} s, --jobs {j2} "
-              f"{times[j2][-1]:.2f} s, ratio {times[j1][-1] / times[j2][-1]:.2f}; "
+        ratios.append(times[j1][-1] / times[j2][-1])
+        print(f"repeat {k + 1}: --jobs {j1} {times[j1][-1]:.2f} s ({cpus[j1][-1]:.1f} s CPU), "
+              f"--jobs {j2} {times[j2][-1]:.2f} s ({cpus[j2][-1]:.1f} s CPU), ratio "
+              f"{ratios[-1]:.2f}; "
               f"{ok}/12 completed, tables equal: {same}; load average {load:.2f} before")
     j1, j2 = args.jobs
     m1, m2 = statistics.median(times[j1]), statistics.median(times[j2])
     print(f"median of {args.repeat}: --jobs {j1} {m1:.2f} s, --jobs {j2} {m2:.2f} s, "
-          f"ratio {m1 / m2:.2f}")
+          f"ratio of the medians {m1 / m2:.2f}, median of the ratios "
+          f"{statistics.median(ratios):.2f}")
     return 0
 
 

@@ -257,3 +257,23 @@ def test_hybrid_scene_reports_its_event_figures(tmp_path, hybrid_fmus):
     E = table.column("drive.E_brake_b")
     assert np.all(E > 0) and E[1] != E[0]
     assert np.all(table.column("drive.n_events") >= 1)
+
+
+def test_flywheel_report_marks_eq_28(tmp_path, servo_scene):
+    """`crankfmu analyze flywheel`: eq. (28) from press_analysis, 0.1409 kg m^2 on the motor
+    shaft (docs/models/stephenson_press_analysis.md section 8); delta_1 falls with J_f and
+    sqrt(26) is lowest at J_Mx."""
+    from crankfmu.studies.flywheel import analytic, report
+
+    J = np.array([0.0, 0.1409, 0.42])
+    a = analytic(servo_scene, J)
+    assert a["J_Mx"] == pytest.approx(0.140866, rel=1e-4) and a["lag"]
+    assert a["delta_1"][0] > a["delta_1"][1] > a["delta_1"][2]
+    assert a["ratio_26"][1] < min(a["ratio_26"][0], a["ratio_26"][2])
+    csv = tmp_path / "sweep.csv"
+    csv.write_text("run,motor.J_flywheel,delta,status,reason,wall_seconds\n"
+                   "0,0.0,0.1007,completed,,1.0\n1,0.2,0.03,completed,,1.0\n"
+                   "2,0.1,nan,failed,x,1.0\n")
+    text = report(csv, servo_scene, tmp_path / "f.png")
+    assert "J_Mx = 14.09 kg m^2 at the crank = 0.1409 kg m^2" in text
+    assert (tmp_path / "f.png").stat().st_size > 10_000
