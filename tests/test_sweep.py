@@ -141,8 +141,13 @@ def serial_table(tmp_path_factory, rotor_fmu_dir):
 @pytest.fixture(scope="module")
 def cluster():
     distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  host="127.0.0.1", dashboard_address=None) as lc:
+    import dask
+    # read at start: a run survives one worker death; a worker holds only the run it executes
+    with dask.config.set({"distributed.scheduler.allowed-failures": 1,
+                          "distributed.scheduler.worker-saturation": 1.0}):
+        lc = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                      host="127.0.0.1", dashboard_address=None)
+    with lc:
         with distributed.Client(lc) as client:
             yield client
 
@@ -277,3 +282,40 @@ def test_flywheel_report_marks_eq_28(tmp_path, servo_scene):
     text = report(csv, servo_scene, tmp_path / "f.png")
     assert "J_Mx = 14.09 kg m^2 at the crank = 0.1409 kg m^2" in text
     assert (tmp_path / "f.png").stat().st_size > 10_000
+
+
+def kill_me(names, rows, status, victim, key):
+    """A task's post-processing that kills its own worker process for one run, every time."""
+    if key == victim:
+        os.kill(os.getpid(), signal.SIGKILL)
+    return {}
+
+
+def _tasks(tmp_path, victim):
+    from crankfmu.scenario import load_scene
+    from crankfmu.studies.executor import RunTask
+    scene = load_scene(spinner(tmp_path, stop=0.5))
+    return [RunTask(k, scene, post=kill_me, post_args={"victim": victim, "key": k})
+            for k in range(4)]
+
+
+def test_a_run_that_always_kills_its_local_worker_is_a_lost_row(tmp_path, rotor_fmu_dir):
+    """The pool is restarted after each break and the lost runs run again one at a time; the
+    run that kills its worker alone is returned as lost with the reason, every other run
+    completes."""
+    from crankfmu.studies.executor import LocalPoolExecutor
+    with LocalPoolExecutor(2) as pool:
+        outputs = pool.run(_tasks(tmp_path, victim=2), rotor_fmu_dir, progress=False)
+    assert [o.status for o in outputs] == ["completed", "completed", "lost", "completed"]
+    assert "a worker process died while this run was in flight (2 times, the last time alone)" \
+        in outputs[2].reason
+
+
+def test_a_run_that_always_kills_its_dask_worker_is_a_lost_row(tmp_path, rotor_fmu_dir, cluster):
+    """Dask reschedules it (allowed-failures, 1 in this cluster), then gives up: KilledWorker,
+    reported as a lost row; the other runs complete."""
+    from crankfmu.studies.executor import DaskExecutor
+    outputs = DaskExecutor(client=cluster).run(_tasks(tmp_path, victim=1), rotor_fmu_dir,
+                                               progress=False)
+    assert [o.status for o in outputs] == ["completed", "lost", "completed", "completed"]
+    assert "KilledWorker" in outputs[1].reason or "died" in outputs[1].reason

@@ -137,7 +137,7 @@ def trial_scene(scene, setting: Setting):
 
 def run_one(scene, setting: Setting, metric: Metric, ref: ReferenceSamples, fmu_dir,
             runs_dir: Path, executor=None) -> Outcome:
-    """One setting, run in this process (or on `executor`)."""
+    """One setting, run on `executor` (default: a pool of one worker process)."""
     return run_settings(scene, [setting], metric, ref, fmu_dir, runs_dir, executor,
                         progress=False)[0]
 
@@ -145,14 +145,19 @@ def run_one(scene, setting: Setting, metric: Metric, ref: ReferenceSamples, fmu_
 def run_settings(scene, settings: list[Setting], metric: Metric, ref: ReferenceSamples, fmu_dir,
                  runs_dir: Path, executor=None, progress=False, label: str = "runs") \
         -> list[Outcome]:
-    """Every setting as one run on `executor` (default: this process, one after another); the
-    runs' CSVs and sidecars are written by this process into runs_dir. The outcomes do not
-    depend on the executor (only wall times do)."""
+    """Every setting as one run on `executor` (default: a pool of one worker process, runs one
+    after another); this process writes the runs' CSVs and sidecars into runs_dir. The
+    outcomes do not depend on the executor (only wall times do)."""
     from ..studies.executor import LocalPoolExecutor, RunTask
 
     tasks = [RunTask(k, trial_scene(scene, s)) for k, s in enumerate(settings)]
+    own = executor is None
     executor = executor or LocalPoolExecutor(1)
-    outputs = executor.run(tasks, fmu_dir, progress=progress, label=label)
+    try:
+        outputs = executor.run(tasks, fmu_dir, progress=progress, label=label)
+    finally:
+        if own:
+            executor.close()
     paths = getattr(executor, "fmu_files", {})
     return [_outcome(s, o, t, metric, ref, runs_dir, paths)
             for s, o, t in zip(settings, outputs, tasks)]

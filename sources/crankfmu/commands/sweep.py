@@ -17,7 +17,7 @@ def _jobs(text: str) -> int:
 def add_executor_options(p, what: str = "runs") -> None:
     p.add_argument("--jobs", type=_jobs, default=None,
                    help=f"local worker processes for the {what} (default: the number of cores; "
-                        "1 runs them one after another in this process)")
+                        "1: one worker, runs one after another)")
     p.add_argument("--scheduler", metavar="ADDRESS",
                    help="run on a Dask distributed cluster, e.g. tcp://HOST:8786 (workers need "
                         "the same crankfmu; FMUs and scenes are sent to them)")

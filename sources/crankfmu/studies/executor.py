@@ -5,12 +5,13 @@ run (`RunTask`: a parsed scene with its parameters set, plus the FMU files it ne
 process. Two implementations of one interface:
 
     LocalPoolExecutor(jobs)     concurrent.futures.ProcessPoolExecutor, spawn context (a fresh
-                                interpreter per worker, nothing inherited from the parent's loaded
-                                FMUs); jobs = 1 runs in the calling process (the serial path).
+                                interpreter per worker, nothing inherited from the parent); jobs
+                                = 1 is a pool of one worker (runs one after another).
     DaskExecutor(address)       a Dask distributed cluster (distributed.Client). No shared disk is
-                                assumed: each FMU file's bytes are scattered to the workers once
-                                (broadcast) and every worker writes them into its own temp folder;
-                                the scene travels inside the task (pickled), so swap bases and
+                                assumed: each FMU file is sent once with Client.upload_file
+                                (kept by the scheduler for workers that restart or join later;
+                                checked against its digest on the worker); the scene travels
+                                inside the task (pickled), so swap bases and
                                 scene files need not exist there. Dask does the scheduling,
                                 retries (`retries=` on submit: a task that raises) and
                                 rescheduling after a worker dies (up to the scheduler's
@@ -302,17 +303,19 @@ class Executor:
 
 
 class LocalPoolExecutor(Executor):
-    """A local process pool of `jobs` workers (default: the number of cores); jobs = 1 runs in
-    this process. A worker process that dies breaks the pool (BrokenProcessPool): the pool is
-    restarted and the runs that were in flight are run again; a run in flight at two breaks is
-    returned as "lost" with the reason. At most `jobs` runs are in flight, so a break loses only
-    the runs that were executing."""
+    """A local process pool of `jobs` workers (default: the number of cores). jobs = 1 is a pool
+    of one: the parent never loads an FMU, so nothing an FMU does (pythonfmu 0.7.0 can leave the
+    interpreter corrupt after a Python exception in an FMU: a later run in the same process has
+    segfaulted in the garbage collector) can take the study down. A worker process that dies
+    breaks the pool (BrokenProcessPool): the pool is restarted and the runs that were in flight
+    are run again, one at a time (so the one that kills its worker is found); a run lost a
+    second time, alone, is returned as "lost" with the reason. At most `jobs` runs are in
+    flight, so a break loses only the runs that were executing."""
 
     def __init__(self, jobs: int | None = None, max_losses: int = 2):
         self.jobs = max(1, int(jobs or os.cpu_count() or 1))
         self.max_losses = max_losses
-        self.description = f"{self.jobs} local process{'es' if self.jobs > 1 else ''}" \
-            if self.jobs > 1 else "this process"
+        self.description = f"{self.jobs} local worker process{'es' if self.jobs > 1 else ''}"
         self._pool = None
 
     def _new_pool(self):
@@ -322,33 +325,29 @@ class LocalPoolExecutor(Executor):
                                    mp_context=multiprocessing.get_context("spawn"))
 
     def _run(self, tasks, files, done) -> None:
-        if self.jobs == 1:
-            for i, task in enumerate(tasks):
-                done(i, execute(task, files))
-            return
         from concurrent.futures import FIRST_COMPLETED, wait
         from concurrent.futures.process import BrokenProcessPool
 
         local = {d: str(p) for d, p in files.items()}
         queue = deque(range(len(tasks)))
+        suspects: deque = deque()  # runs lost in a break: run again alone, to find the culprit
         losses = [0] * len(tasks)
         running: dict = {}
-        while queue or running:
+        while queue or suspects or running:
             if self._pool is None:
                 self._pool = self._new_pool()
             broken = False
-            while queue and len(running) < self.jobs:
-                i = queue.popleft()
+            while not broken and (suspects or queue) and (
+                    len(running) < (1 if suspects else self.jobs)) and \
+                    not (suspects and running):
+                i = (suspects or queue).popleft()
                 try:
                     running[self._pool.submit(execute, tasks[i], local)] = i
                 except BrokenProcessPool:
-                    queue.appendleft(i)
+                    (suspects if losses[i] else queue).appendleft(i)
                     broken = True
-                    break
-            if running and not broken:
-                finished, _ = wait(list(running), return_when=FIRST_COMPLETED)
-            else:
-                finished = set(running)
+            finished, _ = wait(list(running), return_when=FIRST_COMPLETED) if running \
+                else (set(), set())
             lost = []
             for fut in finished:
                 i = running.pop(fut)
@@ -360,7 +359,9 @@ class LocalPoolExecutor(Executor):
                 else:  # e.g. a task that cannot be pickled
                     done(i, RunOutput(tasks[i].key, "error", f"{type(err).__name__}: {err}"))
             if lost or broken:
-                lost += list(running.values())  # the pool is gone: so are the other runs
+                for fut, i in running.items():  # the pool is gone: so are the other runs
+                    fut.exception()
+                    lost.append(i)
                 running.clear()
                 self._pool.shutdown(wait=True, cancel_futures=True)
                 self._pool = None
@@ -369,13 +370,14 @@ class LocalPoolExecutor(Executor):
                     if losses[i] >= self.max_losses:
                         done(i, RunOutput(tasks[i].key, "lost",
                                           f"a worker process died while this run was in flight "
-                                          f"({losses[i]} times); the pool was restarted"))
+                                          f"({losses[i]} times, the last time alone); the pool "
+                                          "was restarted"))
                     else:
-                        queue.appendleft(i)
+                        suspects.appendleft(i)
 
     def close(self) -> None:
         if self._pool is not None:
-            self._pool.shutdown(wait=True)
+            self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
 
 
@@ -392,7 +394,27 @@ def environment_fingerprint() -> dict:
     return out
 
 
-def _execute_shipped(task: RunTask, files: dict) -> RunOutput:
+_VERIFIED: set = set()
+
+
+def _execute_shipped(task: RunTask, names: dict) -> RunOutput:
+    """On a Dask worker: the FMUs were uploaded into the worker's local directory (digest ->
+    file name there); check their digests once per process, then run."""
+    from distributed import get_worker
+
+    folder = Path(get_worker().local_directory)
+    files = {}
+    for digest, name in names.items():
+        path = folder / name
+        if digest not in _VERIFIED:
+            if not path.is_file():
+                return RunOutput(task.key, "error", f"FMU {name} is missing on worker "
+                                                    f"{get_worker().address}")
+            if hashlib.sha256(path.read_bytes()).hexdigest() != digest:
+                return RunOutput(task.key, "error", f"FMU {name} on worker "
+                                                    f"{get_worker().address} has other bytes")
+            _VERIFIED.add(digest)
+        files[digest] = str(path)
     return execute(task, files)
 
 
@@ -400,13 +422,18 @@ class DaskExecutor(Executor):
     """Runs on a Dask distributed cluster: `address` ("tcp://HOST:PORT") or an existing
     `client`. Workers need the same crankfmu, fmpy, pythonfmu, numpy and scipy (checked at
     start); start them with one thread each (`dask worker ADDRESS --nthreads 1`): a worker
-    process runs one run at a time anyway (the FMUs hold its interpreter lock)."""
+    process runs one run at a time anyway (the FMUs hold its interpreter lock).
+
+    The FMU files go to the workers with `Client.upload_file` (a plugin the scheduler keeps, so
+    a worker that restarts or joins later gets them too; scattered data would be lost with the
+    last worker holding it), under names that carry their digest, once per file and client."""
 
     def __init__(self, address: str | None = None, client=None, retries: int = 1):
         from distributed import Client
         self._own = client is None
         self.client = client if client is not None else Client(address)
         self.retries = retries
+        self._uploaded: dict[str, str] = {}
         self.description = f"Dask cluster at {self.client.scheduler.address}"
         self._check_workers()
 
@@ -422,13 +449,21 @@ class DaskExecutor(Executor):
         from distributed import as_completed
         from distributed.scheduler import KilledWorker
 
-        shipped = self.client.scatter({d: p.read_bytes() for d, p in files.items()},
-                                      broadcast=True, hash=False)
+        import shutil
+        import uuid
+        batch = uuid.uuid4().hex
+        for digest, path in files.items():
+            if digest not in self._uploaded:
+                name = f"crankfmu-{digest[:24]}-{path.name}"
+                with tempfile.TemporaryDirectory() as tmp:
+                    shutil.copyfile(path, Path(tmp) / name)
+                    self.client.upload_file(str(Path(tmp) / name), load=False)
+                self._uploaded[digest] = name
         futures = {}
         for i, task in enumerate(tasks):
-            need = {d: shipped[d] for d, _ in task.fmus.values()}
+            need = {d: self._uploaded[d] for d, _ in task.fmus.values()}
             fut = self.client.submit(_execute_shipped, task, need, retries=self.retries,
-                                     pure=False, key=f"crankfmu-run-{os.getpid()}-{id(tasks)}-{i}")
+                                     pure=False, key=f"crankfmu-run-{batch}-{i}")
             futures[fut] = i
         try:
             for fut in as_completed(list(futures)):
@@ -436,15 +471,16 @@ class DaskExecutor(Executor):
                 if fut.status == "finished":
                     done(i, fut.result())
                     continue
-                err = fut.exception()
+                try:
+                    err = fut.exception()
+                except Exception as cancelled:  # noqa: BLE001 - e.g. CancelledError
+                    err = cancelled
                 if isinstance(err, KilledWorker):
                     done(i, RunOutput(tasks[i].key, "lost", f"Dask: {err}"))
                 else:
                     done(i, RunOutput(tasks[i].key, "error", f"{type(err).__name__}: {err}"))
         finally:
             for fut in futures:
-                fut.release()
-            for fut in shipped.values():
                 fut.release()
 
     def close(self) -> None:

@@ -207,7 +207,7 @@ def sweep(scene, vary, out, *, jobs: int | None = None, scheduler: str | None = 
 
     scene      a Scene or a path to a scene file (it needs an [analysis] table)
     vary       list of "COMP.PARAM=..." strings or Vary objects
-    jobs       local worker processes (default: the number of cores; 1 = in this process)
+    jobs       local worker processes (default: the number of cores; 1 = one worker)
     scheduler  "tcp://HOST:PORT" of a Dask scheduler (or `client`: a distributed.Client);
                `executor`: any crankfmu.studies.executor.Executor (not closed here)
     stop_time  end of every run [s]; from_time: start of the analysis window [s]
