@@ -4,7 +4,8 @@ from __future__ import annotations
 
 
 def __getattr__(name):
-    if name in ("sweep", "SweepTable", "Vary", "parse_vary", "expand", "SweepError"):
+    if name in ("SweepTable", "Vary", "parse_vary", "expand", "SweepError"):  # the function:
+        # crankfmu.sweep (crankfmu.studies.sweep is the module)
         from . import sweep as _sweep
         return getattr(_sweep, name)
     if name in ("Executor", "LocalPoolExecutor", "DaskExecutor", "make_executor", "RunTask",
