@@ -189,38 +189,43 @@ def _kill_when_rows(csv: Path, pick_pid, rows: int = 2, timeout: float = 120.0) 
     return info
 
 
-def test_killed_local_worker_loses_nothing(tmp_path, rotor_fmu_dir):
-    """SIGKILL of one pool worker mid-sweep: the pool is restarted, the runs it lost run again,
-    every row is there and equals the serial table (10 s runs, so a run is in flight)."""
-    scene = spinner(tmp_path, stop=10.0)
-    serial = sweep(scene, VARY[:1], tmp_path / "serial", jobs=1, fmu_dir=rotor_fmu_dir,
-                   progress=False, plot=False)
+@pytest.fixture(scope="module")
+def serial_long(tmp_path_factory, rotor_fmu_dir):
+    """12 runs of 5 s (the killed-worker tests need runs still to do after the first row)."""
+    tmp = tmp_path_factory.mktemp("serial_long")
+    scene = spinner(tmp, stop=5.0)
+    return scene, sweep(scene, VARY, tmp / "out", jobs=1, fmu_dir=rotor_fmu_dir,
+                        progress=False, plot=False)
+
+
+def test_killed_local_worker_loses_nothing(tmp_path, rotor_fmu_dir, serial_long):
+    """SIGKILL of one pool worker mid-sweep (after the first row): the pool is restarted, the
+    runs it lost run again, every row is there and equals the serial table."""
+    scene, serial = serial_long
 
     def a_worker():
         kids = [p for p in multiprocessing.active_children() if p.name.startswith("SpawnProcess")]
         return kids[0].pid if kids else None
     info = _kill_when_rows(tmp_path / "pool" / "sweep.csv", a_worker, rows=1)
-    table = sweep(scene, VARY[:1], tmp_path / "pool", jobs=2, fmu_dir=rotor_fmu_dir,
+    table = sweep(scene, VARY, tmp_path / "pool", jobs=2, fmu_dir=rotor_fmu_dir,
                   progress=False, plot=False)
     info["thread"].join(1)
     assert "killed" in info
-    assert [r["status"] for r in table.rows] == ["completed"] * 4
+    assert [r["status"] for r in table.rows] == ["completed"] * 12
     same_table(serial, table)
 
 
-def test_killed_dask_worker_loses_nothing(tmp_path, rotor_fmu_dir, cluster):
+def test_killed_dask_worker_loses_nothing(tmp_path, rotor_fmu_dir, cluster, serial_long):
     """SIGKILL of one Dask worker process mid-sweep: the nanny restarts it, the scheduler
     reschedules its run; every row is there, equal to the serial table."""
-    scene = spinner(tmp_path, stop=10.0)
-    serial = sweep(scene, VARY[:1], tmp_path / "serial", jobs=1, fmu_dir=rotor_fmu_dir,
-                   progress=False, plot=False)
+    scene, serial = serial_long
     pids = list(cluster.run(os.getpid).values())
     info = _kill_when_rows(tmp_path / "dask" / "sweep.csv", lambda: pids[0], rows=1)
-    table = sweep(scene, VARY[:1], tmp_path / "dask", client=cluster, fmu_dir=rotor_fmu_dir,
+    table = sweep(scene, VARY, tmp_path / "dask", client=cluster, fmu_dir=rotor_fmu_dir,
                   progress=False, plot=False)
     info["thread"].join(1)
     assert info.get("killed") == pids[0]
-    assert [r["status"] for r in table.rows] == ["completed"] * 4
+    assert [r["status"] for r in table.rows] == ["completed"] * 12
     same_table(serial, table)
 
 
