@@ -324,3 +324,15 @@ def test_a_run_that_always_kills_its_dask_worker_is_a_lost_row(tmp_path, rotor_f
                                                progress=False)
     assert [o.status for o in outputs] == ["completed", "lost", "completed", "completed"]
     assert "KilledWorker" in outputs[1].reason or "died" in outputs[1].reason
+
+
+def test_latin_hypercube_sweep(tmp_path, rotor_fmu_dir):
+    """--samples: N points, one per stratum of each range, the same on a second call (resumed)."""
+    scene = spinner(tmp_path, stop=1.0)
+    kw = dict(samples=5, seed=1, jobs=1, fmu_dir=rotor_fmu_dir, progress=False, plot=False)
+    table = sweep(scene, ["r.J=0.3:0.9", "r.d=0.2,1.0"], tmp_path / "lhs", **kw)
+    assert len(table) == 5 and all(r["status"] == "completed" for r in table.rows)
+    J = np.sort(table.column("r.J"))
+    assert np.all((J >= 0.3 + 0.12 * np.arange(5)) & (J < 0.3 + 0.12 * np.arange(1, 6)))
+    assert np.all((table.column("r.d") >= 0.2) & (table.column("r.d") <= 1.0))
+    assert sweep(scene, ["r.J=0.3:0.9", "r.d=0.2,1.0"], tmp_path / "lhs", **kw).executed == 0
