@@ -245,14 +245,6 @@ def write_run_files(output: RunOutput, csv: Path, fmu_paths: dict | None = None)
     return csv
 
 
-def recorder_of(output: RunOutput):
-    from ..cosim.results import Recorder
-    rec = Recorder(list(output.names), list(output.units))
-    for row in (output.rows if output.rows is not None else []):
-        rec.add(row[0], row[1:])
-    return rec
-
-
 # -- executors -------------------------------------------------------------------------------------
 def _bar(total: int, progress, label: str):
     if progress is False:
