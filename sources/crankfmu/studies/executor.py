@@ -394,7 +394,11 @@ def _execute_shipped(task: RunTask, names: dict) -> RunOutput:
     file name there); check their digests once per process, then run."""
     from distributed import get_worker
 
+    global _WORKER_DIR
     folder = Path(get_worker().local_directory)
+    if _WORKER_DIR is None:  # inside the worker's own folder: Dask removes it with the worker,
+        # also when the nanny ends the process without running atexit handlers
+        _WORKER_DIR = Path(tempfile.mkdtemp(prefix="crankfmu-", dir=folder))
     files = {}
     for digest, name in names.items():
         path = folder / name
