@@ -52,8 +52,9 @@ def analysis_roles(scene) -> dict:
     from .scenario.scene import SceneError, _variable_ref
     raw = scene.raw.get("analysis")
     if not isinstance(raw, dict):
-        raise SceneError(scene.path, "[analysis]", "required by compare: name the variables "
-                         f"for {', '.join(ROLES)} (optional: {', '.join(OPTIONAL + NUMBERS)})")
+        raise SceneError(scene.path, "[analysis]", "required by compare and sweep: name the "
+                         f"variables for {', '.join(ROLES)} (optional: "
+                         f"{', '.join(OPTIONAL + NUMBERS + LISTS)})")
     unknown = set(raw) - set(ROLES + OPTIONAL + NUMBERS + LISTS)
     if unknown:
         raise SceneError(scene.path, f"[analysis].{sorted(unknown)[0]}",
@@ -64,8 +65,8 @@ def analysis_roles(scene) -> dict:
             out[role] = _variable_ref(scene.path, f"[analysis].{role}", raw[role],
                                       scene.components)
         elif role in ROLES:
-            raise SceneError(scene.path, f"[analysis].{role}", "required by compare: the "
-                             "recorded variable (\"component.variable\") with this role")
+            raise SceneError(scene.path, f"[analysis].{role}", "required by compare and sweep: "
+                             "the recorded variable (\"component.variable\") with this role")
     out["from_time"] = float(raw.get("from_time", scene.start_time))
     events = raw.get("events", [])
     if not isinstance(events, list):

@@ -155,7 +155,7 @@ def _format(value) -> str:
     return str(value)
 
 
-def _parse(column: str, text: str, parameters: list[str]):
+def _parse(column: str, text: str):
     if column in ("status", "reason"):
         return text
     if column == "run":
@@ -171,7 +171,7 @@ def read_table(path: Path) -> tuple[list[str], list[dict]]:
         for raw in reader:
             if len(raw) != len(header):  # a row cut off by an interruption
                 continue
-            rows.append({c: _parse(c, v, header) for c, v in zip(header, raw)})
+            rows.append({c: _parse(c, v) for c, v in zip(header, raw)})
     return header, rows
 
 
