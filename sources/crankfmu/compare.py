@@ -10,6 +10,8 @@ here (the same press may be driven through different components):
     drive_power  = "motor.P_shaft"      # W, the motor's shaft power: energy per stroke
     load_torque  = "press.M_C"          # N m, optional: the press's resistance moment
     from_time    = 0.5                  # s, optional (default start_time): skip a run-up
+    events       = ["drive.E_brake_b", "drive.n_events"]   # optional, hybrid scenes: recorded
+                                        # variables reported at the run's end (a sweep's columns)
 
 Strokes: the crank angle at from_time is phi0; stroke k ends when the crank angle first reaches
 phi0 + 2 pi k. The metrics use the complete strokes only, the window [from_time, end of the last
@@ -34,6 +36,7 @@ import numpy as np
 ROLES = ("crank_angle", "crank_speed", "drive_torque", "drive_power")
 OPTIONAL = ("load_torque",)
 NUMBERS = ("from_time",)
+LISTS = ("events",)
 
 
 @dataclass
@@ -49,22 +52,74 @@ def analysis_roles(scene) -> dict:
     from .scenario.scene import SceneError, _variable_ref
     raw = scene.raw.get("analysis")
     if not isinstance(raw, dict):
-        raise SceneError(scene.path, "[analysis]", "required by compare: name the variables "
-                         f"for {', '.join(ROLES)} (optional: {', '.join(OPTIONAL + NUMBERS)})")
-    unknown = set(raw) - set(ROLES + OPTIONAL + NUMBERS)
+        raise SceneError(scene.path, "[analysis]", "required by compare and sweep: name the "
+                         f"variables for {', '.join(ROLES)} (optional: "
+                         f"{', '.join(OPTIONAL + NUMBERS + LISTS)})")
+    unknown = set(raw) - set(ROLES + OPTIONAL + NUMBERS + LISTS)
     if unknown:
         raise SceneError(scene.path, f"[analysis].{sorted(unknown)[0]}",
-                         f"unknown key; allowed: {', '.join(ROLES + OPTIONAL + NUMBERS)}")
+                         f"unknown key; allowed: {', '.join(ROLES + OPTIONAL + NUMBERS + LISTS)}")
     out = {}
     for role in ROLES + OPTIONAL:
         if role in raw:
             out[role] = _variable_ref(scene.path, f"[analysis].{role}", raw[role],
                                       scene.components)
         elif role in ROLES:
-            raise SceneError(scene.path, f"[analysis].{role}", "required by compare: the "
-                             "recorded variable (\"component.variable\") with this role")
+            raise SceneError(scene.path, f"[analysis].{role}", "required by compare and sweep: "
+                             "the recorded variable (\"component.variable\") with this role")
     out["from_time"] = float(raw.get("from_time", scene.start_time))
+    events = raw.get("events", [])
+    if not isinstance(events, list):
+        raise SceneError(scene.path, "[analysis].events", "must be a list of "
+                         "\"component.variable\" (values reported at the run's end)")
+    out["events"] = [_variable_ref(scene.path, "[analysis].events", v, scene.components)
+                     for v in events]
     return out
+
+
+def role_variables(roles: dict) -> dict:
+    """role -> recorded variable, without from_time and events."""
+    return {r: v for r, v in roles.items() if r not in NUMBERS + LISTS}
+
+
+def record_analysis_variables(scene, roles: dict) -> None:
+    """Add the analysis variables (roles and events) to what `scene` records."""
+    scene.record = list(dict.fromkeys(scene.record + list(role_variables(roles).values())
+                                      + list(roles.get("events", []))))
+
+
+def series_from_arrays(label: str, names: list, rows: np.ndarray, roles: dict) -> Series:
+    """The role series of a run from its recorded arrays (time + `names` columns)."""
+    return Series(label, rows[:, 0].copy(),
+                  {r: rows[:, 1 + names.index(v)].copy() for r, v in role_variables(roles).items()},
+                  roles["from_time"])
+
+
+def _run_both(executor, scenes, out_dir: Path, options) -> list[Series]:
+    """Both runs through `executor`; this process writes their CSVs and sidecars to out_dir.
+    A run that stops early raises RunError here, as run_scene does on the serial path."""
+    from .cosim.runner import RunError
+    from .studies.executor import RunTask, write_run_files
+
+    tasks, roles = [], []
+    for scene, label in scenes:
+        r = analysis_roles(scene)
+        record_analysis_variables(scene, r)
+        roles.append(r)
+        tasks.append(RunTask(label, scene))
+    outputs = executor.run(tasks, options.fmu_dir, progress=options.progress, label="compare")
+    paths = getattr(executor, "fmu_files", {})
+    series = []
+    for task, output, r in zip(tasks, outputs, roles):
+        csv = out_dir / f"{task.key}.csv"
+        if output.sidecar:
+            write_run_files(output, csv, {c: paths.get(d) for c, (d, _) in task.fmus.items()})
+        if output.status == "failed":
+            raise RunError(output.reason, csv)
+        if output.status != "completed":
+            raise RunError(f"{task.key}: {output.status}: {output.reason}", None)
+        series.append(series_from_arrays(task.key, output.names, output.rows, r))
+    return series
 
 
 def run_for_comparison(scene, label: str, out_dir: Path, options) -> Series:
@@ -72,12 +127,10 @@ def run_for_comparison(scene, label: str, out_dir: Path, options) -> Series:
     from dataclasses import replace
     from .cosim.runner import run_scene
     roles = analysis_roles(scene)
-    names = {r: v for r, v in roles.items() if r != "from_time"}
-    scene.record = list(dict.fromkeys(scene.record + list(names.values())))
+    record_analysis_variables(scene, roles)
     result = run_scene(scene, replace(options, out=out_dir / f"{label}.csv"))
     rec = result.recorder
-    return Series(label, rec.rows[:, 0].copy(),
-                  {r: rec.column(v).copy() for r, v in names.items()}, roles["from_time"])
+    return series_from_arrays(label, rec.names, rec.rows, roles)
 
 
 def stroke_ends(time: np.ndarray, angle: np.ndarray, t0: float) -> list[float]:
@@ -186,16 +239,21 @@ def overlay_plot(path: Path, a: Series, b: Series, title: str) -> None:
     plt.close(fig)
 
 
-def compare_scenes(scene_a, scene_b, out_dir: Path, options) -> dict:
-    """Run both scenes into out_dir; write compare.csv and compare.png; return the results."""
+def compare_scenes(scene_a, scene_b, out_dir: Path, options, executor=None) -> dict:
+    """Run both scenes into out_dir; write compare.csv and compare.png; return the results.
+    With an `executor` (crankfmu.studies.executor) both runs go through it (in parallel on a
+    pool or cluster); without one they run in this process one after the other. Same numbers."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     la, lb = scene_a.name, scene_b.name
     if la == lb:
         la, lb = f"A_{la}", f"B_{lb}"
     analysis_roles(scene_a), analysis_roles(scene_b)  # fail before running anything
-    a = run_for_comparison(scene_a, la, out_dir, options)
-    b = run_for_comparison(scene_b, lb, out_dir, options)
+    if executor is None:
+        a = run_for_comparison(scene_a, la, out_dir, options)
+        b = run_for_comparison(scene_b, lb, out_dir, options)
+    else:
+        a, b = _run_both(executor, [(scene_a, la), (scene_b, lb)], out_dir, options)
     rows = compare_table(a, b)
     write_table(out_dir / "compare.csv", rows, la, lb)
     overlay_plot(out_dir / "compare.png", a, b, f"{la} (A) vs {lb} (B)")

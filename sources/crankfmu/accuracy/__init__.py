@@ -13,7 +13,8 @@ from pathlib import Path
 from .metrics import METRICS, Metric, MetricError, make_metric, observed_order, steady_figures
 from .report import format_orders, format_table, plot_work_precision, write_table_csv
 from .sweep import (FLOOR_FACTOR, Outcome, Setting, cheapest, fewest_steps, is_variable_step,
-                    load_or_solve_reference, orders, reference_grid, run_one, settings_for)
+                    load_or_solve_reference, orders, reference_grid, run_one, run_settings,
+                    settings_for)
 
 DEFAULT_STEP_FACTORS = (4.0, 2.0, 1.0, 0.5)          # x the scene's step
 DEFAULT_TOLERANCES = (1e-2, 1e-3, 1e-4)              # a variable-step master's sweep
@@ -41,6 +42,9 @@ class AccuracyOptions:
     floor_factor: float = FLOOR_FACTOR
     fmu_dir: Path | None = None
     progress: bool | None = None
+    jobs: int | None = 1                       # local worker processes (None: every core)
+    scheduler: str | None = None               # a Dask scheduler's address instead
+    executor: object | None = None             # or any crankfmu.studies.executor.Executor
 
 
 @dataclass
@@ -70,8 +74,14 @@ def run_accuracy(scene, options: AccuracyOptions) -> AccuracyResult:
     out.mkdir(parents=True, exist_ok=True)
     ref, ref_csv, cached = load_or_solve_reference(scene, reference_grid(scene, settings), out,
                                                    options.reference_rtol, options.progress)
-    outcomes = [run_one(scene, s, metric, ref, options.fmu_dir, out / "runs")
-                for s in _bar(settings, options.progress, scene.name)]
+    from ..studies.executor import make_executor
+    executor = options.executor or make_executor(options.jobs, options.scheduler)
+    try:
+        outcomes = run_settings(scene, settings, metric, ref, options.fmu_dir, out / "runs",
+                                executor, options.progress, f"{scene.name} accuracy sweep")
+    finally:
+        if options.executor is None:
+            executor.close()
     csv, png = out / "accuracy.csv", out / "work_precision.png"
     write_table_csv(csv, outcomes, metric.describe())
     plot_work_precision(png, outcomes, metric.describe(), options.target,
@@ -86,14 +96,6 @@ def run_accuracy(scene, options: AccuracyOptions) -> AccuracyResult:
 def _excluded_by_default(setting: Setting) -> bool:
     kind = "variable-step" if is_variable_step(setting.algorithm) else setting.algorithm
     return (kind, setting.extrapolation) in DEFAULT_GRID_EXCLUDES
-
-
-def _bar(items, enabled, label):
-    if enabled is False:
-        return items
-    from tqdm import tqdm
-    return tqdm(items, desc=f"{label} accuracy sweep", unit="run",
-                disable=None if enabled is None else False)
 
 
 __all__ = ["AccuracyOptions", "AccuracyResult", "METRICS", "Metric", "MetricError", "Outcome",

@@ -126,30 +126,68 @@ def _read_reference(csv: Path) -> ReferenceSamples:
 
 
 # -- runs ----------------------------------------------------------------------------------------
-def run_one(scene, setting: Setting, metric: Metric, ref: ReferenceSamples, fmu_dir,
-            runs_dir: Path) -> Outcome:
-    from ..cosim.runner import RunError, RunOptions, run_scene
-
+def trial_scene(scene, setting: Setting):
+    """`scene` with the master settings of `setting`."""
     trial = copy.deepcopy(scene)
     m = trial.master
     m.algorithm, m.extrapolation, m.step = setting.algorithm, setting.extrapolation, setting.step
     m.fmu_tolerance, m.tolerance = setting.fmu_tolerance, setting.tolerance
+    return trial
+
+
+def run_one(scene, setting: Setting, metric: Metric, ref: ReferenceSamples, fmu_dir,
+            runs_dir: Path, executor=None) -> Outcome:
+    """One setting, run on `executor` (default: a pool of one worker process)."""
+    return run_settings(scene, [setting], metric, ref, fmu_dir, runs_dir, executor,
+                        progress=False)[0]
+
+
+def run_settings(scene, settings: list[Setting], metric: Metric, ref: ReferenceSamples, fmu_dir,
+                 runs_dir: Path, executor=None, progress=False, label: str = "runs") \
+        -> list[Outcome]:
+    """Every setting as one run on `executor` (default: a pool of one worker process, runs one
+    after another); this process writes the runs' CSVs and sidecars into runs_dir. The
+    outcomes do not depend on the executor (only wall times do)."""
+    from ..studies.executor import LocalPoolExecutor, RunTask
+
+    tasks = [RunTask(k, trial_scene(scene, s)) for k, s in enumerate(settings)]
+    own = executor is None
+    executor = executor or LocalPoolExecutor(1)
+    try:
+        outputs = executor.run(tasks, fmu_dir, progress=progress, label=label)
+    finally:
+        if own:
+            executor.close()
+    paths = getattr(executor, "fmu_files", {})
+    return [_outcome(s, o, t, metric, ref, runs_dir, paths)
+            for s, o, t in zip(settings, outputs, tasks)]
+
+
+def _outcome(setting: Setting, output, task, metric: Metric, ref: ReferenceSamples,
+             runs_dir: Path, paths: dict) -> Outcome:
+    from ..cosim.runner import RunError
+    from ..studies.executor import write_run_files
+
     outcome = Outcome(setting, "tolerance" if is_variable_step(setting.algorithm) else "step")
-    try:
-        result = run_scene(trial, RunOptions(out=runs_dir / f"{setting.label}.csv",
-                                             fmu_dir=fmu_dir, progress=False))
-    except RunError as err:
-        outcome.status = f"failed: {err}"
+    csv = runs_dir / f"{setting.label}.csv"
+    fmu_paths = {c: paths.get(d) for c, (d, _) in task.fmus.items()}
+    if output.sidecar:  # the run got as far as writing results (completed or stopped early)
+        write_run_files(output, csv, fmu_paths)
+    if output.status == "failed":
+        outcome.status = f"failed: {RunError(output.reason, csv)}"
         return outcome
-    except (ValueError, NotImplementedError) as err:  # a master refusing the scene or setting
-        outcome.status = f"unavailable: {err}"
+    if output.status == "refused":  # a master refusing the scene or setting
+        outcome.status = f"unavailable: {output.reason}"
         return outcome
-    rec = result.recorder
-    outcome.wall_seconds = result.wall_seconds
-    outcome.do_steps, outcome.rollbacks = _counts(result.statistics)
-    outcome.communication_steps = _communication_steps(result)
+    if output.status != "completed":
+        outcome.status = f"{output.status}: {output.reason}"
+        return outcome
+    outcome.wall_seconds = output.wall_seconds
+    outcome.do_steps, outcome.rollbacks = _counts(output.statistics)
+    outcome.communication_steps = int(output.sidecar.get("communication_steps", output.steps))
     try:
-        outcome.error = metric.error(rec.rows[:, 0], {n: rec.column(n) for n in rec.names}, ref)
+        outcome.error = metric.error(output.rows[:, 0],
+                                     {n: output.column(n) for n in output.names}, ref)
     except MetricError as err:
         outcome.status = f"no error figure: {err}"
     return outcome
@@ -162,13 +200,6 @@ def _counts(statistics: dict) -> tuple[int, int]:
             calls += int(value["doStep_calls"])
             rollbacks += int(value.get("rollbacks", 0))
     return calls, rollbacks
-
-
-def _communication_steps(result) -> int:
-    try:
-        return int(json.loads(Path(result.sidecar).read_text()).get("communication_steps", 0))
-    except (OSError, ValueError):
-        return int(result.steps)
 
 
 # -- summaries -----------------------------------------------------------------------------------

@@ -57,6 +57,9 @@ def register(sub) -> None:
     p.add_argument("--rtol", type=float, default=1e-10, help="reference solver tolerance")
     p.add_argument("--floor-factor", type=float, default=10.0,
                    help="orders use errors above this x the FMU tolerance (default 10)")
+    from .sweep import add_executor_options
+    add_executor_options(p, "runs (wall times are measured per run: parallel runs share the "
+                            "machine)")
     p.set_defaults(func=run_accuracy_command)
 
 
@@ -75,7 +78,7 @@ def run_accuracy_command(args) -> int:
         fmu_tolerances=args.fmu_tolerances, metric=args.metric, variables=args.variables,
         cycles=args.cycles, target=args.target, reference_rtol=args.rtol,
         floor_factor=args.floor_factor, fmu_dir=args.fmus,
-        progress=False if args.no_progress else None)
+        progress=False if args.no_progress else None, jobs=args.jobs, scheduler=args.scheduler)
     if args.tolerances:
         options.tolerances = args.tolerances
     problem = _check_options(options)

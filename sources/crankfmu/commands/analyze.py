@@ -1,5 +1,7 @@
 """`crankfmu analyze impact`: the rocker impact paper's table and which of its claims hold;
-`crankfmu analyze hammer CSV`: the blows of a hammer run (hammer.toml, hammer_bearings.toml)."""
+`crankfmu analyze hammer CSV`: the blows of a hammer run (hammer.toml, hammer_bearings.toml);
+`crankfmu analyze flywheel DIR/sweep.csv`: the servo press's delta against the flywheel from a
+sweep, with the paper's eq. (28) (crankfmu/studies/flywheel.py)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -26,6 +28,24 @@ def register(sub) -> None:
     hammer.add_argument("--component", default="hammer", help="the CrankRockerHammer component")
     hammer.add_argument("--plot", type=Path, help="PNG: motor torque, crank speed, P and T peaks")
     hammer.set_defaults(func=run_hammer)
+    fly = what.add_parser("flywheel", help="servo press delta against motor.J_flywheel from a "
+                                           "sweep's sweep.csv, with eq. (28) and the first "
+                                           "approximation; --plot PNG")
+    fly.add_argument("csv", type=Path, help="sweep.csv of crankfmu sweep --vary motor.J_flywheel=...")
+    fly.add_argument("--scene", type=Path, default=Path("scenarios/servo_press.toml"),
+                     help="the swept scene (default scenarios/servo_press.toml)")
+    fly.add_argument("--plot", type=Path, help="PNG: delta against J_flywheel, (28) marked")
+    fly.set_defaults(func=run_flywheel)
+
+
+def run_flywheel(args) -> int:
+    from ..scenario import load_scene
+    from ..studies.flywheel import report
+
+    print(report(args.csv, load_scene(args.scene), args.plot))
+    if args.plot:
+        print(f"wrote {args.plot}")
+    return 0
 
 
 def run_impact(args) -> int:

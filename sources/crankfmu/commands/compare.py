@@ -15,6 +15,8 @@ def register(sub) -> None:
     p.add_argument("--stop-time", type=float, help="end of both runs [s]")
     p.add_argument("--fmus", type=Path, help="folder of built FMUs (default fmus/ beside scenarios/)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    from .sweep import add_executor_options
+    add_executor_options(p, "two runs")
     p.set_defaults(func=run_compare)
 
 
@@ -29,8 +31,10 @@ def run_compare(args) -> int:
             if args.stop_time <= sc.start_time:
                 raise SceneError(sc.path, "--stop-time", f"must exceed start_time = {sc.start_time}")
             sc.stop_time = args.stop_time
+    from ..studies.executor import make_executor
     options = RunOptions(fmu_dir=args.fmus, progress=False if args.no_progress else None)
-    result = compare_scenes(scenes[0], scenes[1], args.out, options)
+    with make_executor(args.jobs, args.scheduler) as executor:
+        result = compare_scenes(scenes[0], scenes[1], args.out, options, executor)
     print(result["text"])
     print(f"wrote {result['csv']}, {result['png']} and the runs' CSVs in {args.out}")
     return 0

@@ -1,0 +1,70 @@
+"""`crankfmu sweep SCENE --vary COMP.PARAM=V1,V2,... --out DIR`: many runs of one scene on all
+cores (or a Dask cluster), one row each in DIR/sweep.csv with the scene's [analysis] figures,
+and DIR/sweep.png (crankfmu/studies/sweep.py)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def _jobs(text: str) -> int:
+    import argparse
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value
+
+
+def add_executor_options(p, what: str = "runs") -> None:
+    p.add_argument("--jobs", type=_jobs, default=None,
+                   help=f"local worker processes for the {what} (default: the number of cores; "
+                        "1: one worker, runs one after another)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run on a Dask distributed cluster, e.g. tcp://HOST:8786 (workers need "
+                        "the same crankfmu; FMUs and scenes are sent to them)")
+
+
+def register(sub) -> None:
+    p = sub.add_parser("sweep", help="parameter sweep of a scene on all cores or a Dask cluster: "
+                                     "one row of [analysis] figures per run")
+    p.add_argument("scene", type=Path, help="scene file (.toml, with an [analysis] table)")
+    p.add_argument("--vary", action="append", required=True, metavar="COMP.PARAM=VALUES",
+                   help="V1,V2,... or START:STOP:N (linear, ends included); repeatable: the "
+                        "full-factorial grid")
+    p.add_argument("--samples", type=int,
+                   help="Latin hypercube of N points over the --vary ranges instead of the grid")
+    p.add_argument("--seed", type=int, default=0, help="seed of the Latin hypercube (default 0)")
+    p.add_argument("--out", type=Path, required=True,
+                   help="folder: sweep.csv, sweep.json, sweep.png (an interrupted sweep resumes)")
+    p.add_argument("--stop-time", type=float, help="end of every run [s]")
+    p.add_argument("--from-time", type=float,
+                   help="start of the analysis window [s] (default [analysis].from_time)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="COMP.PARAM=V",
+                   help="fixed parameter for every run (repeatable)")
+    p.add_argument("--fmus", type=Path, help="folder of built FMUs (default fmus/ beside scenarios/)")
+    add_executor_options(p)
+    p.add_argument("--no-plot", action="store_true", help="no sweep.png")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run_sweep)
+
+
+def run_sweep(args) -> int:
+    import sys
+
+    from ..studies.sweep import SweepError, sweep
+
+    try:
+        table = sweep(args.scene, args.vary, args.out, jobs=args.jobs, scheduler=args.scheduler,
+                      stop_time=args.stop_time, from_time=args.from_time, samples=args.samples,
+                      seed=args.seed, overrides=args.overrides, fmu_dir=args.fmus,
+                      progress=False if args.no_progress else None, plot=not args.no_plot)
+    except SweepError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    bad = [r for r in table.rows if r["status"] != "completed"]
+    print(f"{len(table)} runs ({table.executed} executed now, {len(table) - table.executed} "
+          f"kept from {table.csv}); {len(table) - len(bad)} completed")
+    for r in bad:
+        point = ", ".join(f"{p} = {r[p]:g}" for p in table.parameters)
+        print(f"  run {r['run']} ({point}): {r['status']}: {r['reason']}")
+    print(f"wrote {table.csv}" + (f", {table.png}" if table.png else ""))
+    return 0

@@ -1,0 +1,97 @@
+"""`accuracy` and `compare` through the executor: a local pool of 2 gives the serial path's
+numbers and files exactly (wall times aside)."""
+from __future__ import annotations
+
+import copy
+import json
+import math
+
+from crankfmu.scenario import load_scene
+from crankfmu.studies.executor import LocalPoolExecutor
+
+from conftest import SCENARIOS
+
+
+def test_accuracy_on_a_pool_equals_serial(fmu_dir, tmp_path):
+    from crankfmu.accuracy import AccuracyOptions, run_accuracy
+
+    results = {}
+    for jobs in (1, 2):
+        scene = load_scene(SCENARIOS / "servo_press.toml")
+        scene.stop_time = 0.1
+        results[jobs] = run_accuracy(scene, AccuracyOptions(
+            out_dir=tmp_path / f"j{jobs}", algorithms=["gauss-seidel", "jacobi"],
+            extrapolations=[0, 2], steps=[2e-3, 1e-3], fmu_dir=fmu_dir, progress=False,
+            jobs=jobs))
+    a, b = results[1].outcomes, results[2].outcomes
+    assert len(a) == len(b) == 8
+    for oa, ob in zip(a, b):
+        assert oa.setting == ob.setting and oa.status == ob.status == "completed"
+        assert oa.error == ob.error and math.isfinite(oa.error)
+        assert (oa.do_steps, oa.rollbacks, oa.communication_steps) == \
+            (ob.do_steps, ob.rollbacks, ob.communication_steps)
+        name = f"runs/{oa.setting.label}.csv"
+        assert (tmp_path / "j1" / name).read_bytes() == (tmp_path / "j2" / name).read_bytes()
+        side = json.loads((tmp_path / "j2" / name).with_suffix(".json").read_text())
+        assert side["status"] == "completed" and side["communication_steps"] == oa.communication_steps
+    assert results[1].orders == results[2].orders
+
+
+def test_compare_on_a_pool_equals_serial(fmu_dir, tmp_path):
+    from crankfmu.compare import compare_scenes
+    from crankfmu.cosim.runner import RunOptions
+
+    def scenes():
+        a = load_scene(SCENARIOS / "servo_press.toml")
+        a.stop_time = 1.0
+        b = copy.deepcopy(a)
+        b.name = "with_flywheel"
+        b.components["motor"].parameters["J_flywheel"] = 0.1
+        return a, b
+    options = RunOptions(fmu_dir=fmu_dir, progress=False)
+    serial = compare_scenes(*scenes(), tmp_path / "serial", options)
+    with LocalPoolExecutor(2) as pool:
+        parallel = compare_scenes(*scenes(), tmp_path / "pool", options, pool)
+    assert serial["text"] == parallel["text"]
+    for name in ("compare.csv", "servo_press.csv", "with_flywheel.csv"):
+        assert (tmp_path / "serial" / name).read_bytes() == (tmp_path / "pool" / name).read_bytes()
+
+
+def test_accuracy_and_compare_on_a_dask_cluster_equal_serial(fmu_dir, tmp_path):
+    """The same two studies on a LocalCluster of 2 worker processes (127.0.0.1): the numbers
+    and the run files equal the serial path's."""
+    distributed = __import__("pytest").importorskip("distributed")
+    from crankfmu.accuracy import AccuracyOptions, run_accuracy
+    from crankfmu.compare import compare_scenes
+    from crankfmu.cosim.runner import RunOptions
+    from crankfmu.studies.executor import DaskExecutor
+
+    def scene(stop):
+        s = load_scene(SCENARIOS / "servo_press.toml")
+        s.stop_time = stop
+        return s
+
+    def options(out, **kw):
+        return AccuracyOptions(out_dir=out, algorithms=["gauss-seidel"], extrapolations=[0, 1],
+                               steps=[2e-3, 1e-3], fmu_dir=fmu_dir, progress=False, **kw)
+    serial = run_accuracy(scene(0.1), options(tmp_path / "serial", jobs=1))
+    b = scene(0.7)
+    b.name = "with_flywheel"
+    b.components["motor"].parameters["J_flywheel"] = 0.1
+    run_opts = RunOptions(fmu_dir=fmu_dir, progress=False)
+    serial_cmp = compare_scenes(scene(0.7), copy.deepcopy(b), tmp_path / "cmp_serial", run_opts)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  host="127.0.0.1", dashboard_address=None) as lc, \
+            distributed.Client(lc) as client:
+        dask = DaskExecutor(client=client)
+        on_dask = run_accuracy(scene(0.1), options(tmp_path / "dask", executor=dask))
+        dask_cmp = compare_scenes(scene(0.7), copy.deepcopy(b), tmp_path / "cmp_dask", run_opts,
+                                  dask)
+    for oa, ob in zip(serial.outcomes, on_dask.outcomes):
+        assert (oa.setting, oa.status, oa.error, oa.do_steps) == \
+            (ob.setting, ob.status, ob.error, ob.do_steps)
+        name = f"runs/{oa.setting.label}.csv"
+        assert (tmp_path / "serial" / name).read_bytes() == (tmp_path / "dask" / name).read_bytes()
+    assert serial_cmp["text"] == dask_cmp["text"]
+    assert (tmp_path / "cmp_serial" / "compare.csv").read_bytes() == \
+        (tmp_path / "cmp_dask" / "compare.csv").read_bytes()

@@ -1,0 +1,338 @@
+"""Parameter sweeps (crankfmu.studies): grid expansion, failed runs as rows, resume, and the same
+table from one process, a local pool of 2 and a Dask LocalCluster of 2 worker processes on
+127.0.0.1, also when a worker process is killed mid-sweep.
+
+The physics does not matter here, so the scene is one Rotor (exact matrix-exponential steps)
+spun up by a constant torque against a damper: its angle grows, so the [analysis] figures
+(strokes, mean speed, delta, ...) are all defined. The failed-run test uses the servo press with
+a rod shorter than the crank (press.l < press.r), which the press refuses.
+"""
+from __future__ import annotations
+
+import math
+import multiprocessing
+import os
+import signal
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from crankfmu.studies.sweep import SweepError, expand, parse_vary, read_table, sweep
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def rotor_fmu_dir(tmp_path_factory):
+    from crankfmu.fmi.build import build_all
+
+    dest = tmp_path_factory.mktemp("sweep_fmus")
+    build_all(dest, ["Rotor"])
+    return dest
+
+
+def spinner(tmp_path: Path, stop: float = 2.0) -> Path:
+    path = tmp_path / "spinner.toml"
+    path.write_text(f"""
+[scene]
+name = "spinner"
+stop_time = {stop}
+[master]
+step = 1e-3
+[components.r]
+fmu = "Rotor"
+parameters = {{ J = 0.5, d = 0.4, w0 = 6.0 }}
+[inputs]
+"r.flange_tau" = 2.0
+[record]
+variables = ["r.flange_phi", "r.flange_w"]
+interval = 1e-2
+[analysis]
+crank_angle = "r.flange_phi"
+crank_speed = "r.flange_w"
+drive_torque = "r.flange_tau"
+drive_power = "r.E"
+from_time = 0.5
+events = ["r.E"]
+""")
+    return path
+
+
+VARY = ["r.J=0.3:0.9:4", "r.d=0.2,0.6,1.0"]  # 12 runs
+
+
+def same_table(a, b) -> None:
+    """Every column but wall time equal, floats identical (NaN where NaN)."""
+    assert a.columns == b.columns
+    same_rows(a.columns, a.rows, b.rows)
+
+
+def same_rows(columns, rows_a, rows_b) -> None:
+    assert len(rows_a) == len(rows_b)
+    for ra, rb in zip(rows_a, rows_b):
+        for c in columns:
+            if c == "wall_seconds":
+                continue
+            va, vb = ra[c], rb[c]
+            if isinstance(va, float) and math.isnan(va):
+                assert isinstance(vb, float) and math.isnan(vb), (c, ra, rb)
+            else:
+                assert va == vb, (c, va, vb)
+
+
+def test_vary_and_grid():
+    assert parse_vary("press.l=0.2,0.25").grid == [0.2, 0.25]
+    assert parse_vary("motor.J_flywheel=0:0.3:4").grid == pytest.approx([0.0, 0.1, 0.2, 0.3])
+    points = expand([parse_vary(v) for v in VARY])
+    assert len(points) == 12 and points[1] == {"r.J": 0.3, "r.d": 0.6}  # last varies fastest
+    lhs = expand([parse_vary("a.x=0:1"), parse_vary("b.y=10,20,30")], samples=8, seed=3)
+    assert lhs == expand([parse_vary("a.x=0:1"), parse_vary("b.y=10,20,30")], samples=8, seed=3)
+    xs = sorted(p["a.x"] for p in lhs)
+    assert len(lhs) == 8 and all(k / 8 <= x < (k + 1) / 8 for k, x in enumerate(xs))  # one per stratum
+    assert all(10 <= p["b.y"] <= 30 for p in lhs)
+    for bad in ("press.l", "l=1,2", "press.l=a,b", "press.l=0:1:0"):
+        with pytest.raises(SweepError):
+            parse_vary(bad)
+
+
+def test_failed_run_is_a_row_and_the_sweep_resumes(tmp_path, fmu_dir, capsys):
+    """press.l = 0.04 < r = 0.05 cannot assemble: that row says failed with the press's reason,
+    the other rows are complete; a second call runs nothing and gives the same table."""
+    out = tmp_path / "sweep"
+    kw = dict(stop_time=0.05, from_time=0.0, jobs=1, fmu_dir=fmu_dir, progress=False)
+    table = sweep(ROOT / "scenarios/servo_press.toml", ["press.l=0.25,0.04,0.3"], out, **kw)
+    status = [r["status"] for r in table.rows]
+    assert status == ["completed", "failed", "completed"]
+    bad = table.rows[1]
+    assert "l = 0.04 is not allowed" in bad["reason"] and "\n" not in bad["reason"]
+    assert math.isnan(bad["mean_crank_speed"])
+    assert all(math.isfinite(r["mean_crank_speed"]) for r in (table.rows[0], table.rows[2]))
+    header, rows = read_table(out / "sweep.csv")
+    assert header[:2] == ["run", "press.l"] and header[-3:] == ["status", "reason", "wall_seconds"]
+    assert [r["status"] for r in rows] == status
+    again = sweep(ROOT / "scenarios/servo_press.toml", ["press.l=0.25,0.04,0.3"], out, **kw)
+    assert again.executed == 0
+    same_table(table, again)
+    with pytest.raises(SweepError, match="another study"):
+        sweep(ROOT / "scenarios/servo_press.toml", ["press.l=0.25,0.3"], out, **kw)
+
+
+def test_resume_after_interruption(tmp_path, rotor_fmu_dir):
+    """Rows already in sweep.csv (an interrupted sweep) are kept; only the others run."""
+    scene = spinner(tmp_path, stop=1.0)
+    out = tmp_path / "s"
+    full = sweep(scene, VARY, out, jobs=1, fmu_dir=rotor_fmu_dir, progress=False, plot=False)
+    lines = (out / "sweep.csv").read_text().splitlines()
+    (out / "sweep.csv").write_text("\n".join(lines[:6]) + "\n" + lines[6][:10])  # 5 rows + a cut one
+    resumed = sweep(scene, VARY, out, jobs=1, fmu_dir=rotor_fmu_dir, progress=False, plot=False)
+    assert resumed.executed == 7
+    same_table(full, resumed)
+
+
+@pytest.fixture(scope="module")
+def serial_table(tmp_path_factory, rotor_fmu_dir):
+    tmp = tmp_path_factory.mktemp("serial")
+    return sweep(spinner(tmp), VARY, tmp / "out", jobs=1, fmu_dir=rotor_fmu_dir, progress=False)
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    distributed = pytest.importorskip("distributed")
+    import dask
+    # read at start: a run survives one worker death; a worker holds only the run it executes
+    with dask.config.set({"distributed.scheduler.allowed-failures": 1,
+                          "distributed.scheduler.worker-saturation": 1.0}):
+        lc = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                      host="127.0.0.1", dashboard_address=None)
+    with lc:
+        with distributed.Client(lc) as client:
+            yield client
+
+
+def test_dask_cluster_equals_serial(tmp_path, rotor_fmu_dir, serial_table, cluster):
+    """A LocalCluster of 2 worker processes on 127.0.0.1 gives the --jobs 1 table exactly, and
+    both workers took runs (they get the FMUs' bytes, not a path)."""
+    assert all(r["status"] == "completed" for r in serial_table.rows)
+    assert len(serial_table.rows) == 12
+    table = sweep(spinner(tmp_path), VARY, tmp_path / "out", client=cluster,
+                  fmu_dir=rotor_fmu_dir, progress=False)
+    same_table(serial_table, table)
+    assert (tmp_path / "out" / "sweep.png").is_file()
+
+
+def test_local_pool_equals_serial(tmp_path, rotor_fmu_dir, serial_table):
+    table = sweep(spinner(tmp_path), VARY, tmp_path / "out", jobs=2, fmu_dir=rotor_fmu_dir,
+                  progress=False, plot=False)
+    same_table(serial_table, table)
+
+
+def _kill_when_rows(csv: Path, pick_pid, rows: int = 2, timeout: float = 120.0) -> dict:
+    """In a thread: when `csv` has `rows` data rows, SIGKILL the process pick_pid() names."""
+    info = {}
+
+    def watch():
+        end = time.time() + timeout
+        while time.time() < end:
+            if csv.is_file() and len(csv.read_text().splitlines()) > rows:
+                pid = pick_pid()
+                if pid:
+                    os.kill(pid, signal.SIGKILL)
+                    info["killed"] = pid
+                    return
+            time.sleep(0.02)
+    thread = threading.Thread(target=watch, daemon=True)
+    thread.start()
+    info["thread"] = thread
+    return info
+
+
+@pytest.fixture(scope="module")
+def serial_long(tmp_path_factory, rotor_fmu_dir):
+    """12 runs of 5 s (the killed-worker tests need runs still to do after the first row)."""
+    tmp = tmp_path_factory.mktemp("serial_long")
+    scene = spinner(tmp, stop=5.0)
+    return scene, sweep(scene, VARY, tmp / "out", jobs=1, fmu_dir=rotor_fmu_dir,
+                        progress=False, plot=False)
+
+
+def test_killed_local_worker_loses_nothing(tmp_path, rotor_fmu_dir, serial_long):
+    """SIGKILL of one pool worker mid-sweep (after the first row): the pool is restarted, the
+    runs it lost run again, every row is there and equals the serial table."""
+    scene, serial = serial_long
+
+    def a_worker():
+        kids = [p for p in multiprocessing.active_children() if p.name.startswith("SpawnProcess")]
+        return kids[0].pid if kids else None
+    info = _kill_when_rows(tmp_path / "pool" / "sweep.csv", a_worker, rows=1)
+    table = sweep(scene, VARY, tmp_path / "pool", jobs=2, fmu_dir=rotor_fmu_dir,
+                  progress=False, plot=False)
+    info["thread"].join(1)
+    assert "killed" in info
+    assert [r["status"] for r in table.rows] == ["completed"] * 12
+    same_table(serial, table)
+
+
+def test_killed_dask_worker_loses_nothing(tmp_path, rotor_fmu_dir, cluster, serial_long):
+    """SIGKILL of one Dask worker process mid-sweep: the nanny restarts it, the scheduler
+    reschedules its run; every row is there, equal to the serial table."""
+    scene, serial = serial_long
+    pids = list(cluster.run(os.getpid).values())
+    info = _kill_when_rows(tmp_path / "dask" / "sweep.csv", lambda: pids[0], rows=1)
+    table = sweep(scene, VARY, tmp_path / "dask", client=cluster, fmu_dir=rotor_fmu_dir,
+                  progress=False, plot=False)
+    info["thread"].join(1)
+    assert info.get("killed") == pids[0]
+    assert [r["status"] for r in table.rows] == ["completed"] * 12
+    same_table(serial, table)
+
+
+def test_cli_on_a_scheduler_address(tmp_path, rotor_fmu_dir, cluster, capsys):
+    """`crankfmu sweep --scheduler tcp://127.0.0.1:PORT` (the address, not a client object)."""
+    from crankfmu.cli import main
+
+    scene = spinner(tmp_path, stop=2.0)
+    out = tmp_path / "cli"
+    assert main(["sweep", str(scene), "--vary", "r.J=0.3,0.6", "--vary", "r.d=0.2:1.0:2",
+                 "--out", str(out), "--scheduler", cluster.scheduler.address,
+                 "--fmus", str(rotor_fmu_dir), "--no-progress"]) == 0
+    assert "4 runs (4 executed now, 0 kept" in capsys.readouterr().out
+    serial = sweep(scene, ["r.J=0.3,0.6", "r.d=0.2:1.0:2"], tmp_path / "serial", jobs=1,
+                   fmu_dir=rotor_fmu_dir, progress=False, plot=False)
+    header, rows = read_table(out / "sweep.csv")
+    assert header == serial.columns
+    same_rows(header, rows, serial.rows)
+    assert (out / "sweep.png").is_file()
+
+
+@pytest.fixture(scope="module")
+def hybrid_fmus(tmp_path_factory):
+    from crankfmu.fmi.build import build_all
+    dest = tmp_path_factory.mktemp("hybrid_fmus")
+    build_all(dest, ["DcServoMotor", "StephensonPress", "InductionMotor", "PlanetaryClutchDrive"])
+    return dest
+
+
+def test_hybrid_scene_reports_its_event_figures(tmp_path, hybrid_fmus):
+    """The conventional press ([analysis].events): brake energies and the number of mode events
+    at the run's end are columns; a stronger ring brake engages faster and dissipates less."""
+    table = sweep(ROOT / "scenarios/conventional_press.toml", ["drive.Mp_b=800,1200"],
+                  tmp_path / "out", stop_time=0.6, jobs=1, fmu_dir=hybrid_fmus, progress=False,
+                  plot=False)
+    for name in ("drive.E_brake_b", "drive.E_brake_h", "drive.n_events"):
+        assert name in table.columns
+    assert [r["status"] for r in table.rows] == ["completed", "completed"]
+    E = table.column("drive.E_brake_b")
+    assert np.all(E > 0) and E[1] != E[0]
+    assert np.all(table.column("drive.n_events") >= 1)
+
+
+def test_flywheel_report_marks_eq_28(tmp_path, servo_scene):
+    """`crankfmu analyze flywheel`: eq. (28) from press_analysis, 0.1409 kg m^2 on the motor
+    shaft (docs/models/stephenson_press_analysis.md section 8); delta_1 falls with J_f and
+    sqrt(26) is lowest at J_Mx."""
+    from crankfmu.studies.flywheel import analytic, report
+
+    J = np.array([0.0, 0.1409, 0.42])
+    a = analytic(servo_scene, J)
+    assert a["J_Mx"] == pytest.approx(0.140866, rel=1e-4) and a["lag"]
+    assert a["delta_1"][0] > a["delta_1"][1] > a["delta_1"][2]
+    assert a["ratio_26"][1] < min(a["ratio_26"][0], a["ratio_26"][2])
+    csv = tmp_path / "sweep.csv"
+    csv.write_text("run,motor.J_flywheel,delta,status,reason,wall_seconds\n"
+                   "0,0.0,0.1007,completed,,1.0\n1,0.2,0.03,completed,,1.0\n"
+                   "2,0.1,nan,failed,x,1.0\n")
+    text = report(csv, servo_scene, tmp_path / "f.png")
+    assert "J_Mx = 14.09 kg m^2 at the crank = 0.1409 kg m^2" in text
+    assert (tmp_path / "f.png").stat().st_size > 10_000
+
+
+def kill_me(names, rows, status, victim, key):
+    """A task's post-processing that kills its own worker process for one run, every time."""
+    if key == victim:
+        os.kill(os.getpid(), signal.SIGKILL)
+    return {}
+
+
+def _tasks(tmp_path, victim):
+    from crankfmu.scenario import load_scene
+    from crankfmu.studies.executor import RunTask
+    scene = load_scene(spinner(tmp_path, stop=0.5))
+    return [RunTask(k, scene, post=kill_me, post_args={"victim": victim, "key": k})
+            for k in range(4)]
+
+
+def test_a_run_that_always_kills_its_local_worker_is_a_lost_row(tmp_path, rotor_fmu_dir):
+    """The pool is restarted after each break and the lost runs run again one at a time; the
+    run that kills its worker alone is returned as lost with the reason, every other run
+    completes."""
+    from crankfmu.studies.executor import LocalPoolExecutor
+    with LocalPoolExecutor(2) as pool:
+        outputs = pool.run(_tasks(tmp_path, victim=2), rotor_fmu_dir, progress=False)
+    assert [o.status for o in outputs] == ["completed", "completed", "lost", "completed"]
+    assert "a worker process died while this run was in flight (2 times, the last time alone)" \
+        in outputs[2].reason
+
+
+def test_a_run_that_always_kills_its_dask_worker_is_a_lost_row(tmp_path, rotor_fmu_dir, cluster):
+    """Dask reschedules it (allowed-failures, 1 in this cluster), then gives up: KilledWorker,
+    reported as a lost row; the other runs complete."""
+    from crankfmu.studies.executor import DaskExecutor
+    outputs = DaskExecutor(client=cluster).run(_tasks(tmp_path, victim=1), rotor_fmu_dir,
+                                               progress=False)
+    assert [o.status for o in outputs] == ["completed", "lost", "completed", "completed"]
+    assert "KilledWorker" in outputs[1].reason or "died" in outputs[1].reason
+
+
+def test_latin_hypercube_sweep(tmp_path, rotor_fmu_dir):
+    """--samples: N points, one per stratum of each range, the same on a second call (resumed)."""
+    scene = spinner(tmp_path, stop=1.0)
+    kw = dict(samples=5, seed=1, jobs=1, fmu_dir=rotor_fmu_dir, progress=False, plot=False)
+    table = sweep(scene, ["r.J=0.3:0.9", "r.d=0.2,1.0"], tmp_path / "lhs", **kw)
+    assert len(table) == 5 and all(r["status"] == "completed" for r in table.rows)
+    J = np.sort(table.column("r.J"))
+    assert np.all((J >= 0.3 + 0.12 * np.arange(5)) & (J < 0.3 + 0.12 * np.arange(1, 6)))
+    assert np.all((table.column("r.d") >= 0.2) & (table.column("r.d") <= 1.0))
+    assert sweep(scene, ["r.J=0.3:0.9", "r.d=0.2,1.0"], tmp_path / "lhs", **kw).executed == 0
