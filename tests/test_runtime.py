@@ -16,7 +16,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from crankfmu.physics import dopri
-from crankfmu.physics.base import InputPolynomial, held
+from crankfmu.physics.base import InputPolynomial, IntegrationError, held
 from crankfmu.physics.catalog import FMU_MODELS, make_physics, physics_class
 from crankfmu.physics.closed_form import lag_step, phi_functions
 from crankfmu.physics.dc_motor import DcServoMotor
@@ -200,3 +200,35 @@ def test_runtime_path_as_accurate_as_scipy_path(name):
     print(f"\n{name}: error at rtol 1e-10, runtime {ours[0]:.1e} ({ours[1]}), scipy "
           f"{theirs[0]:.1e} ({theirs[1]})")
     assert ours[0] <= max(5.0 * theirs[0], 1e-9)
+
+
+def test_non_finite_derivatives_fail_with_a_reason():
+    """A zero inertia makes the derivatives NaN: the step fails at once, saying so (before, the
+    NaN error norm compared as an accepted step and the failure surfaced as 'cannot convert
+    float NaN to integer')."""
+    with pytest.raises(dopri.IntegrationFailure, match="derivatives are not finite"):
+        dopri.integrate(lambda t, y: [y[1], math.nan],
+                        0.0, [0.0, 0.0], 1e-3, 1e-8, [1e-8, 1e-8], 1e-3)
+
+
+def test_a_step_has_one_work_limit_over_its_event_restarts():
+    """`step` (what the FMU calls) counts right-hand-side calls over every restart of the step
+    (here: the forging window's edges), `advance` per integration between restarts. With the
+    limit just above the largest integration, `advance` finishes and `step` does not."""
+    press = make_physics("StephensonPress", {}, ["forging_load"])
+    u = [3000.0, 0.05, 0.0, 0.0]  # the crank passes several window edges in 0.2 s
+    calls, integrate = [], press.integrate
+
+    def counting(*args, **kwargs):
+        sol = integrate(*args, **kwargs)
+        calls.append(sol.calls)
+        return sol
+    press.integrate = counting
+    press.advance(0.0, press.initial_state(u), 0.2, held(u), 1e-10, [1e-10, 1e-10])
+    assert len(calls) >= 3
+    press.max_derivative_calls_per_step = max(calls) + 7
+    press._h_next = None
+    assert press.advance(0.0, press.initial_state(u), 0.2, held(u), 1e-10, [1e-10, 1e-10])
+    press._h_next = None
+    with pytest.raises(IntegrationError, match="more than"):
+        press.step(0.0, press.initial_state(u), 0.2, held(u), 1e-10, [1e-10, 1e-10])

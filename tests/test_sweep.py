@@ -99,13 +99,14 @@ def test_vary_and_grid():
 
 
 def test_failed_run_is_a_row_and_the_sweep_resumes(tmp_path, fmu_dir, capsys):
-    """press.l = 0.04 < r = 0.05 cannot assemble: that row says failed with the press's reason,
-    the other rows are complete; a second call runs nothing and gives the same table."""
+    """press.l = 0.04 < r = 0.05 cannot assemble: that row says refused (the runner checks the
+    parameters with the physics before any FMU starts) with the press's reason, the other rows
+    are complete; a second call runs nothing and gives the same table."""
     out = tmp_path / "sweep"
     kw = dict(stop_time=0.05, from_time=0.0, jobs=1, fmu_dir=fmu_dir, progress=False)
     table = sweep(ROOT / "scenarios/servo_press.toml", ["press.l=0.25,0.04,0.3"], out, **kw)
     status = [r["status"] for r in table.rows]
-    assert status == ["completed", "failed", "completed"]
+    assert status == ["completed", "refused", "completed"]
     bad = table.rows[1]
     assert "l = 0.04 is not allowed" in bad["reason"] and "\n" not in bad["reason"]
     assert math.isnan(bad["mean_crank_speed"])

@@ -126,13 +126,12 @@ def main(argv=None) -> int:
     try:
         parser = build_parser()
         args = parser.parse_args(argv)
-        from .physics.base import ParameterError  # physics errors raised in this process
     except KeyboardInterrupt:  # Ctrl-C while the commands are imported
         print("error: interrupted (Ctrl-C)", file=sys.stderr)
         return 130
     try:
         return args.func(args)
-    except (CrankfmuError, ParameterError) as err:
+    except CrankfmuError as err:
         print(f"error: {err}", file=sys.stderr)
         return getattr(err, "exit_status", 2)
     except KeyboardInterrupt:  # Ctrl-C outside a run's stepping loop (loading, building)

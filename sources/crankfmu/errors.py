@@ -8,18 +8,14 @@ interrupted run (`RunInterrupted`, Ctrl-C) to 130: no traceback for anything a u
 """
 from __future__ import annotations
 
+from .physics.base import CrankfmuError  # noqa: F401 - defined with the physics (bottom layer)
+
 # Limits on what a scene may ask for; each is named in the error that enforces it.
 MAX_STEPS = 10_000_000          # communication steps of one run ([master].max_steps raises it)
 MAX_SCENE_FILE_BYTES = 4 << 20  # a scene file (TOML) read into memory
 MAX_NAME_LENGTH = 100           # a scene name becomes a file name: results/<name>.csv
 MAX_TIME = 1e12                 # |start_time|, |stop_time| [s]: beyond this a step is lost in
                                 # the time's rounding
-
-
-class CrankfmuError(Exception):
-    """Base of the errors crankfmu reports to a user (exit status 2 from the command line)."""
-
-    exit_status = 2
 
 
 class InterruptedRun(CrankfmuError):

@@ -62,7 +62,15 @@ SCIPY_SOLVER = "scipy_solver"
 TOLERANCE_FACTOR = 0.1
 
 
-class ParameterError(ValueError):
+class CrankfmuError(Exception):
+    """Base of the errors crankfmu reports to a user (exit status 2 from the command line).
+    Defined here, in the bottom layer, so the physics' own errors derive from it too;
+    `crankfmu.errors` re-exports it with the limits and the other user-facing errors."""
+
+    exit_status = 2
+
+
+class ParameterError(CrankfmuError, ValueError):
     """A parameter value the physics cannot accept; names the parameter and what is allowed."""
 
     def __init__(self, model: str, name: str, value, allowed: str):
@@ -110,6 +118,7 @@ class PhysicsModel:
     integrator: str = "DOP853"  # solve_ivp's method with solver = "scipy" (model's stiffness)
     _h_next: float | None = None  # dopri5's step size, carried from one advance to the next
     restart_state: Sequence[float] = ()  # the state advance (re)starts from, for event_functions
+    _work_left: int | None = None  # right-hand-side calls left in this step (see `step`)
     max_events_per_step: int = 1000
     # Work limit per communication step (as CVODE's mxstep): a diverging coupling can drive a
     # state so far that integrating one step would take hours; failing fast lets the master
@@ -210,6 +219,18 @@ class PhysicsModel:
     def output_index(self, name: str) -> int:
         return [v.name for v in self.outputs].index(name)
 
+    def step(self, t0: float, x0, h: float, u_of_t: InputFunction, rtol: float, atol) -> list:
+        """`advance` under one work limit for the whole step (what the FMU calls): at most
+        max_derivative_calls_per_step right-hand-side calls over all its event restarts, so a
+        step that cannot finish (a diverging coupling, a parameter that makes the model
+        absurdly stiff) fails with a reason in bounded time. A direct `advance` has the limit
+        per integration between events."""
+        self._work_left = self.max_derivative_calls_per_step
+        try:
+            return self.advance(t0, x0, h, u_of_t, rtol, atol)
+        finally:
+            self._work_left = None
+
     def advance(self, t0: float, x0, h: float, u_of_t: InputFunction,
                 rtol: float, atol) -> list:
         """Integrate the states from t0 to t0 + h, locating events on the way."""
@@ -248,25 +269,31 @@ class PhysicsModel:
 
             def rhs(s, y):
                 return derivatives(s, y, u)
+        limit = self.max_derivative_calls_per_step if self._work_left is None else \
+            self._work_left
         try:
             if self.solver == "scipy":
-                return self._integrate_scipy(rhs, u_of_t, t, x, t_end, rtol, atol, events)
-            sol = dopri.integrate(rhs, t, x, t_end, TOLERANCE_FACTOR * rtol,
-                                  [TOLERANCE_FACTOR * a for a in _per_state(atol, len(x))],
-                                  self._h_next, events, self.max_derivative_calls_per_step)
-        except dopri.WorkLimitError as err:
+                sol = self._integrate_scipy(rhs, u_of_t, t, x, t_end, rtol, atol, events, limit)
+            else:
+                sol = dopri.integrate(rhs, t, x, t_end, TOLERANCE_FACTOR * rtol,
+                                      [TOLERANCE_FACTOR * a for a in _per_state(atol, len(x))],
+                                      self._h_next, events, limit)
+                self._h_next = sol.h_next
+        except dopri.IntegrationFailure as err:
             raise IntegrationError(f"{self.model_name}: {err}") from None
-        self._h_next = sol.h_next
+        if self._work_left is not None:
+            self._work_left -= sol.calls
         return sol
 
-    def _integrate_scipy(self, rhs, u_of_t, t, x, t_end, rtol, atol, events) -> Integration:
+    def _integrate_scipy(self, rhs, u_of_t, t, x, t_end, rtol, atol, events,
+                         limit: int) -> Integration:
         calls = [0]
 
         def counted(s, y):
             calls[0] += 1
-            if calls[0] > self.max_derivative_calls_per_step:
+            if calls[0] > limit:
                 raise IntegrationError(
-                    f"{self.model_name}: more than {self.max_derivative_calls_per_step} "
+                    f"{self.model_name}: more than {limit} "
                     f"derivative evaluations in the step from t = {t:.9g} s (states "
                     f"{dict(zip(self.state_names(), np.round(y, 6)))}): diverging or too stiff")
             return rhs(s, y)

@@ -49,7 +49,11 @@ ERROR_EXPONENT = -1.0 / 5.0
 EPS = 2.220446049250313e-16
 
 
-class WorkLimitError(RuntimeError):
+class IntegrationFailure(RuntimeError):
+    """The integration cannot go on; the message says where and why."""
+
+
+class WorkLimitError(IntegrationFailure):
     """More right-hand-side calls than allowed, or a step size below round-off."""
 
 
@@ -67,7 +71,7 @@ class Integration:
 
 
 def _rms(values: Sequence[float]) -> float:
-    return math.sqrt(sum(v * v for v in values) / len(values))
+    return math.sqrt(sum(float(v) * float(v) for v in values) / len(values))
 
 
 def initial_step(f, t0: float, x0: Vector, f0: Vector, span: float, rtol: float, atol) -> float:
@@ -187,6 +191,10 @@ def integrate(f: Callable[[float, Vector], Sequence[float]], t0: float, x0: Sequ
         t_new = t_end if last else t + h_try
         stages, x_new, err = attempt(f, t, x, k1, h_try, t_new, rtol, atol)
         calls += 6
+        if err != err:  # NaN: a derivative is not finite (a zero inertia, an overflow)
+            raise IntegrationFailure(f"the derivatives are not finite in the step from "
+                                     f"t = {t:.9g} s (states there "
+                                     f"{[round(float(v), 9) for v in x]})")
         if err >= 1.0:
             h = h_try * max(MIN_FACTOR, SAFETY * err ** ERROR_EXPONENT)
             rejected = True

@@ -225,7 +225,7 @@ class ModelSlave(Fmi2Slave):
         """The states over the step; False (with the reason logged) if that fails."""
         model = self._model
         try:
-            x = model.advance(current_time, self._x, step_size, u_of_t, self._rtol, self._atol)
+            x = model.step(current_time, self._x, step_size, u_of_t, self._rtol, self._atol)
         except (IntegrationError, FloatingPointError, ValueError, ZeroDivisionError,
                 OverflowError) as err:
             self.log(f"{self.instance_name}: step at t = {current_time:.9g} s failed: {err}",
