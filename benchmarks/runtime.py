@@ -15,7 +15,9 @@
     metric on the crank speed, against the rtol 1e-10 reference): the cheapest co-simulation
     found among a few settings against scipy's solve_ivp of the same equations (the composed
     monolithic model) in ONE call, at the loosest rtol that reaches 1e-4 (target: co-simulation
-    CPU below scipy's).
+    CPU below scipy's). CPU of the solve only on both sides: the run's cpu_seconds (FMU
+    initialization, steps, release), not loading the FMUs; solve_ivp's call, not building the
+    composed model.
 
 CPU is time.process_time (the FMUs run in this process); per-step figures are differences of a
 2N- and an N-step run (loading and setup cancel), the median of the repeats. Printed, not
@@ -252,8 +254,9 @@ def part_c(n: int) -> None:
                          else f"{label} {seconds}")
         print(f"    {name:<21} " + " | ".join(cells))
     motor = physics_class("DcServoMotor")
-    lag = [_alone_seconds(fmu_dir / "DcServoMotor.fmu", motor, ["electrical_lag"], n,
-                          {"L_a": tau * 0.5, "flange_w": 10.0}) for tau in (1e-6, 1e-2)]
+    lag = [min(_alone_seconds(fmu_dir / "DcServoMotor.fmu", motor, ["electrical_lag"], n,
+                              {"L_a": tau * 0.5, "flange_w": 10.0}) for _ in range(3))
+           for tau in (1e-6, 1e-2)]  # best of 3: the first call of a process pays for imports
     print(f"    DcServoMotor, electrical_lag with tau = 1e-6 s: {lag[0] * 1e6:.1f} us, with "
           f"tau = 1e-2 s: {lag[1] * 1e6:.1f} us (R_a = 0.5 ohm; ratio {lag[0] / lag[1]:.2f})")
     print()
@@ -286,9 +289,8 @@ def part_d(out: Path, target: float = 1e-4) -> None:
         m.algorithm, m.extrapolation, m.step = algorithm, ex, step
         if tol is not None:
             m.tolerance = tol
-        start = CLOCK()
         result = run_scene(trial, RunOptions(out=out / "cosim.csv", progress=False))
-        cpu = CLOCK() - start
+        cpu = result.cpu_seconds  # initialization, steps, release; not loading the FMUs
         rec = result.recorder
         error = metric.error(rec.rows[:, 0], {k: rec.column(k) for k in rec.names}, ref)
         label = f"{algorithm} ex{ex} " + (f"tol {tol:g}" if tol else f"h {step:g}")

@@ -57,6 +57,7 @@ class RunResult:
     steps: int
     master_statistics: dict = field(default_factory=dict)
     coupling_error: dict = field(default_factory=dict)
+    cpu_seconds: float = 0.0  # this process's CPU from initialization to the FMUs' release
 
 
 @dataclass
@@ -186,7 +187,7 @@ def run_scene(scene: Scene, options: RunOptions | None = None) -> RunResult:
 
 def _run(scene, options, out, log, fmus, system, master, recorder, readers, interrupt):
     h, t0 = scene.master.step, scene.start_time
-    wall = time.perf_counter()
+    wall, cpu = time.perf_counter(), time.process_time()
     failure = outcome = None
     step, t = 0, t0
     try:
@@ -212,7 +213,7 @@ def _run(scene, options, out, log, fmus, system, master, recorder, readers, inte
         failure, outcome = f"stopped near t = {master.time or t:.6g} s: " \
                            f"{type(err).__name__}: {err}", "failed"
     finally:
-        wall = time.perf_counter() - wall
+        wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
         close_fmus(fmus)
     if interrupt.requested and not failure:
         failure, outcome = f"interrupted (Ctrl-C) at t = {master.time or t0:.6g} s", "interrupted"
@@ -230,7 +231,8 @@ def _run(scene, options, out, log, fmus, system, master, recorder, readers, inte
                    "max_step": m.max_step, "max_steps": m.max_steps, "order": system.order},
         "components": {n: {"fmu": str(f.path), "parameters": scene.components[n].parameters,
                            "effects": scene.components[n].effects} for n, f in fmus.items()},
-        "versions": versions(), "wall_seconds": wall, "communication_steps": step,
+        "versions": versions(), "wall_seconds": wall, "cpu_seconds": cpu,
+        "communication_steps": step,
         "statistics": statistics, "master_statistics": master.master_statistics(),
         "coupling_error": master.coupling_error(), **options.extra_sidecar})
     if failure:
@@ -239,7 +241,7 @@ def _run(scene, options, out, log, fmus, system, master, recorder, readers, inte
     if png:
         plot(png, recorder, f"{scene.name}: {scene.master.algorithm}, step {h:g} s")
     return RunResult(out, sidecar, png, recorder, statistics, wall, step,
-                     master.master_statistics(), master.coupling_error())
+                     master.master_statistics(), master.coupling_error(), cpu)
 
 
 def _fixed_steps(master, scene: Scene, progress):

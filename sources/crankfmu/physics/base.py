@@ -46,7 +46,6 @@ from types import SimpleNamespace
 from typing import Callable, Sequence
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from . import dopri
 from .dopri import Integration
@@ -297,6 +296,7 @@ class PhysicsModel:
                     f"derivative evaluations in the step from t = {t:.9g} s (states "
                     f"{dict(zip(self.state_names(), np.round(y, 6)))}): diverging or too stiff")
             return rhs(s, y)
+        from scipy.integrate import solve_ivp  # ~0.3 s to import: only on this path
         options = {"jac": self._jac_for(u_of_t)} if self._has_jacobian() else {}
         sol = solve_ivp(counted, (t, t_end), np.asarray(x, dtype=float), method=self.integrator,
                         rtol=rtol, atol=np.asarray(atol, dtype=float), events=list(events) or None,
