@@ -232,3 +232,29 @@ def test_a_step_has_one_work_limit_over_its_event_restarts():
     press._h_next = None
     with pytest.raises(IntegrationError, match="more than"):
         press.step(0.0, press.initial_state(u), 0.2, held(u), 1e-10, [1e-10, 1e-10])
+
+
+@pytest.mark.parametrize("f, a, b", [
+    (lambda x: math.cos(x) - x, 0.0, 1.0),
+    (lambda x: x ** 3 - 2 * x - 5, 2.0, 3.0),
+    (lambda x: abs(x - 0.3) ** 0.5 * math.copysign(1.0, x - 0.3), 0.0, 1.0),  # kink at root
+    (lambda x: (x - 0.25) ** 3 + 1e-3 * (x - 0.25), -1.0, 1.0),               # flat near root
+    (lambda x: math.exp(x) - 1e5, 0.0, 20.0),
+])
+def test_brent_as_scipy(f, a, b):
+    """The runtime's Brent (physics/roots.py, so FMUs need not import scipy.optimize) finds the
+    root scipy.optimize.brentq finds, to the tolerance both were given, in as many calls."""
+    from scipy.optimize import brentq as scipy_brentq
+
+    from crankfmu.physics.roots import brentq
+    calls = [0, 0]
+
+    def counted(k):
+        def g(x):
+            calls[k] += 1
+            return f(x)
+        return g
+    ours = brentq(counted(0), a, b, xtol=1e-14)
+    theirs = scipy_brentq(counted(1), a, b, xtol=1e-14)
+    assert ours == pytest.approx(theirs, abs=2e-14)
+    assert calls[0] == calls[1]

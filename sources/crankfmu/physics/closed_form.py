@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from typing import Sequence
 
-from scipy.optimize import brentq
+from .roots import brentq
 
 Poly = Sequence[float]
 

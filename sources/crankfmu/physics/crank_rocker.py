@@ -24,10 +24,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.optimize import brentq
 
 from .base import Effect, ParameterError, Variable
 from .rocker_impact import RockerImpact
+from .roots import brentq
 
 _ROCKER_PARAMETERS = tuple(v for v in RockerImpact.parameters
                            if v.name not in ("strike_at_start", "theta_start", "w_start"))
@@ -197,7 +197,7 @@ class CrankRockerHammer(RockerImpact):
         loss = p.c_rod * rate * rate + (p.support_damping * v0 * v0 if self.compliant else 0.0)
         rocker = [om, ddth, P / self._Z, P, P * P / self._Z, 1.0 if self._d["contact"] else 0.0]
         crank = [w, (drive + M_crank) / self._crank_inertia(u), drive * w, loss]
-        return np.array(([v0, ddu] if self.compliant else []) + rocker + crank)
+        return ([v0, ddu] if self.compliant else []) + rocker + crank
 
     def mechanical_energy(self, x, u) -> float:
         """Rocker (own J) and support, contact, crank + motor kinetic energy, rod spring."""

@@ -21,7 +21,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
-from scipy.optimize import brentq
+from .roots import brentq
 
 Vector = list  # list[float]
 

@@ -294,7 +294,7 @@ class RockerImpact(PhysicsModel):
         _, v, _, om, _, _, _, _ = self._split(x)
         Z = self._Z
         rocker = [om, ddth, P / Z, P, P * P / Z, 1.0 if self._d["contact"] else 0.0]
-        return np.array(([v, ddu] if self.compliant else []) + rocker)
+        return ([v, ddu] + rocker) if self.compliant else rocker
 
     @property
     def _Z(self) -> float:

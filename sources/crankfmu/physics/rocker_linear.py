@@ -26,8 +26,8 @@ from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
-from scipy.linalg import expm
-from scipy.optimize import brentq
+
+from .roots import brentq
 
 # Defaults of the paper's iteration: the start guess "from experience" and the stop criterion.
 P_GUESS = 1.0e6          # N, first guess of Pm (the paper: "about 1 MN")
@@ -247,12 +247,14 @@ class LinearFlow:
     def __call__(self, t) -> np.ndarray:
         """States at the times t: shape (len(t), n) for an array, (n,) for a scalar."""
         t_arr = np.atleast_1d(np.asarray(t, dtype=float))
+        from scipy.linalg import expm  # imported when used: ~0.3 s in every FMU process
         y = np.array([expm(self.A * s) @ self.y0 for s in t_arr])
         return y if np.ndim(t) else y[0]
 
     def grid(self, t0: float, t1: float, n: int) -> tuple[np.ndarray, np.ndarray]:
         """(t, states) on n + 1 equally spaced points: one expm for the step, then products."""
         t = np.linspace(t0, t1, n + 1)
+        from scipy.linalg import expm
         phi = expm(self.A * ((t1 - t0) / n))
         y = np.empty((n + 1, len(self.y0)))
         y[0] = self(t0)

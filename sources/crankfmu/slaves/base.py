@@ -226,9 +226,11 @@ class ModelSlave(Fmi2Slave):
         model = self._model
         try:
             x = model.step(current_time, self._x, step_size, u_of_t, self._rtol, self._atol)
-        except (IntegrationError, FloatingPointError, ValueError, ZeroDivisionError,
-                OverflowError) as err:
-            self.log(f"{self.instance_name}: step at t = {current_time:.9g} s failed: {err}",
+        except Exception as err:  # noqa: BLE001 - an exception must not reach pythonfmu
+            # (it reports fmi2Fatal, and repeated ones have corrupted the shared interpreter)
+            reason = err if isinstance(err, IntegrationError) else \
+                f"{type(err).__name__}: {err}"
+            self.log(f"{self.instance_name}: step at t = {current_time:.9g} s failed: {reason}",
                      Fmi2Status.error)
             return False
         if not all(map(math.isfinite, x)):
