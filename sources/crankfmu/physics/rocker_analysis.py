@@ -1,19 +1,7 @@
 """Rocker impact unit: the paper's analysis (seed rocker_impact_unit, eq. 1-18).
 
-Coordinates (docs/models/rocker_impact.md has the derivation): u0 is the pivot's displacement
-along the tool axis, theta the rocker angle (the strike point moves by S theta), w the tool end.
-
-    m (u0'' + r theta'') = -P - T,    m r u0'' + J theta'' = -P S          (Lagrange)
-    T = c0 u0,   P = c (u0 + S theta - w) while > 0,   w' = P/Z,   Z = E F/a
-
-eliminate to the paper's pair (1)-(2):
-
-    T'' + k1^2 T = a1 P,                 k1^2 = c0 J/(m J_C),  a1 = c0 (m r S - J)/(m J_C)
-    P'' + 2 h P' + k2^2 P = a2 T,        2h = c/Z,  k2^2 = c [1/m + (S - r)^2/J_C],
-                                         a2 = c (m r S - J)/(m J_C),  J_C = J - m r^2
-    P(0) = 0, P'(0) = c V0, T(0) = T'(0) = 0 (the rocker touches the tool at t = 0).
-
-Pinned rocker (c0 -> infinity): P'' + 2h P' + (c S^2/J) P = 0 and T = (m r S/J - 1) P exactly.
+The equations, (1)-(2) and the pinned rocker, are in `rocker_linear` (the FMU's share of the
+theory); docs/models/rocker_impact.md has the derivation.
 
 What is here
     RockerData                 the rocker, the contact, the rod and the bearing constant k_n.

@@ -375,15 +375,8 @@ class LocalPoolExecutor(Executor):
 
 def environment_fingerprint() -> dict:
     """What must match between the parent and the workers for identical numbers."""
-    import platform
-    from importlib import metadata
-    out = {"python": platform.python_version()}
-    for pkg in ("crankfmu", "fmpy", "pythonfmu", "numpy", "scipy"):
-        try:
-            out[pkg] = metadata.version(pkg)
-        except metadata.PackageNotFoundError:
-            out[pkg] = None
-    return out
+    from ..cosim.results import versions
+    return versions()
 
 
 _VERIFIED: set = set()
