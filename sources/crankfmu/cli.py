@@ -71,7 +71,8 @@ def cmd_run(args) -> int:
     from .cosim.runner import RunOptions, run_scene
 
     scene = load_with_options(args)
-    result = run_scene(scene, RunOptions(out=args.out, plot=args.plot, fmu_dir=args.fmus,
+    out = args.out or Path("results") / f"{scene.name}.csv"
+    result = run_scene(scene, RunOptions(out=out, plot=args.plot, fmu_dir=args.fmus,
                                          progress=False if args.no_progress else None,
                                          verbose_log=args.log))
     m = scene.master

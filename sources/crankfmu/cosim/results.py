@@ -35,6 +35,17 @@ class Recorder:
         return self.rows[:, 1 + self.names.index(name)]
 
 
+def normalize_unit(unit: str | None) -> str:
+    """A unit in FMI's spelling (the modelDescription's): "1" for a dimensionless value."""
+    return unit or "1"
+
+
+def column_units(recorder: Recorder) -> dict[str, str]:
+    """Unit of every CSV column, "time" first (the sidecar's "units")."""
+    return {"time": "s", **{n: normalize_unit(u) for n, u in zip(recorder.names,
+                                                                 recorder.units)}}
+
+
 def atomic_write(path: Path, write) -> None:
     """Write through a temporary file in the same folder, then rename it onto `path`: a reader
     (or a crash) sees the old file or the new one, never a half-written one."""
@@ -99,21 +110,46 @@ def write_sidecar(path: Path, payload: dict) -> None:
     atomic_write(path, lambda f: f.write(text))
 
 
-def plot(path: Path, recorder: Recorder, title: str) -> None:
-    """One panel per recorded variable, with units, over time."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+# Okabe & Ito's colour-blind-safe palette (black first is left out: it is the grid's colour)
+PALETTE = ("#0072B2", "#E69F00", "#009E73", "#D55E00", "#CC79A7", "#56B4E9", "#F0E442",
+           "#000000")
 
-    n = len(recorder.names)
-    fig, axes = plt.subplots(n, 1, figsize=(9, 1.9 * n + 0.8), sharex=True, squeeze=False)
-    t = recorder.rows[:, 0]
-    for ax, name, unit, k in zip(axes[:, 0], recorder.names, recorder.units, range(n)):
-        ax.plot(t, recorder.rows[:, k + 1], lw=1.0)
-        ax.set_ylabel(f"{name}\n[{unit or '1'}]", fontsize=8)
-        ax.grid(alpha=0.3)
-    axes[-1, 0].set_xlabel("time [s]")
+
+def new_figure(**kwargs):
+    """A matplotlib Figure that is not registered with pyplot: making, saving or returning it
+    never selects or changes the backend (inline plots in Jupyter keep working), and it is freed
+    like any object."""
+    from matplotlib.figure import Figure
+    return Figure(**kwargs)
+
+
+def style_axes(ax) -> None:
+    ax.set_prop_cycle(color=PALETTE)
+    ax.grid(alpha=0.3)
+
+
+def axis_label(name: str, unit: str | None) -> str:
+    """`name [unit]` in FMI's unit spelling; `[1]` for a dimensionless value."""
+    return f"{name} [{unit or '1'}]"
+
+
+def figure(names, units, rows: np.ndarray, title: str):
+    """One panel per recorded variable over time, each axis labelled with its unit; returns the
+    Figure (crankfmu.cosim.results.new_figure: the backend is left alone)."""
+    n = len(names)
+    fig = new_figure(figsize=(9, 1.9 * n + 0.8))
+    axes = fig.subplots(n, 1, sharex=True, squeeze=False)
+    t = rows[:, 0]
+    for ax, name, unit, k in zip(axes[:, 0], names, units, range(n)):
+        style_axes(ax)
+        ax.plot(t, rows[:, k + 1], lw=1.0)
+        ax.set_ylabel(axis_label(name, unit).replace(" [", "\n["), fontsize=8)
+    axes[-1, 0].set_xlabel(axis_label("time", "s"))
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return fig
+
+
+def plot(path: Path, recorder: Recorder, title: str) -> None:
+    """One panel per recorded variable, with units, over time, written as a PNG."""
+    figure(recorder.names, recorder.units, recorder.rows, title).savefig(path, dpi=110)

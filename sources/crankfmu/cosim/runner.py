@@ -16,7 +16,8 @@ from ..errors import CrankfmuError, InterruptedRun
 from ..scenario.scene import Scene, SceneError, check_run_size
 from .fmu import FmuInstance, LogCollector
 from .masters import DivergenceError, make_master
-from .results import Recorder, plot, versions, write_csv, write_sidecar
+from .results import (Recorder, column_units, normalize_unit, plot, versions, write_csv,
+                      write_sidecar)
 from .wiring import (System, check_components, check_links, check_loops, check_physics,
                      default_fmu_dir, resolve_fmu)
 
@@ -48,8 +49,8 @@ class NonFiniteValue(DivergenceError):
 
 @dataclass
 class RunResult:
-    csv: Path
-    sidecar: Path
+    csv: Path | None       # None: nothing was written (RunOptions.out None)
+    sidecar: Path | None
     png: Path | None
     recorder: Recorder
     statistics: dict
@@ -57,11 +58,12 @@ class RunResult:
     steps: int
     master_statistics: dict = field(default_factory=dict)
     coupling_error: dict = field(default_factory=dict)
+    metadata: dict = field(default_factory=dict)  # the sidecar's content (also when not written)
 
 
 @dataclass
 class RunOptions:
-    out: Path | None = None
+    out: Path | None = None       # the CSV to write (sidecar, PNG beside it); None: write nothing
     plot: bool = False
     fmu_dir: Path | None = None
     progress: bool | None = None  # None: a bar when stderr is a terminal
@@ -109,7 +111,7 @@ def _recorder(scene: Scene, fmus) -> tuple[Recorder, list]:
     for comp in dict.fromkeys(r.split(".", 1)[0] for r in names):
         vars_ = [r.split(".", 1)[1] for r in names if r.split(".", 1)[0] == comp]
         readers.append((fmus[comp].reader(vars_), [names.index(f"{comp}.{v}") for v in vars_]))
-    return Recorder(names, units), readers
+    return Recorder(names, [normalize_unit(u) for u in units]), readers
 
 
 def _sample(recorder: Recorder, readers, t: float) -> None:
@@ -163,7 +165,7 @@ def run_scene(scene: Scene, options: RunOptions | None = None) -> RunResult:
     and raises RunError (RunInterrupted for Ctrl-C)."""
     options = options or RunOptions()
     check_run_size(scene)
-    out = options.out or Path("results") / f"{scene.name}.csv"
+    out = Path(options.out) if options.out is not None else None
     log = LogCollector(echo=options.verbose_log)
     fmus = load_fmus(scene, options.fmu_dir or default_fmu_dir(scene), log)
     try:
@@ -216,13 +218,17 @@ def _run(scene, options, out, log, fmus, system, master, recorder, readers, inte
         close_fmus(fmus)
     if interrupt.requested and not failure:
         failure, outcome = f"interrupted (Ctrl-C) at t = {master.time or t0:.6g} s", "interrupted"
-    csv, sidecar = partial_paths(out) if failure else (out, out.with_suffix(".json"))
-    write_csv(csv, recorder)
+    if out is None:
+        csv = sidecar = None
+    else:
+        csv, sidecar = partial_paths(out) if failure else (out, out.with_suffix(".json"))
+        write_csv(csv, recorder)
     statistics = master.statistics()
     m = scene.master
-    write_sidecar(sidecar, {
+    metadata = {
         "scene": str(scene.path), "name": scene.name, "status": failure or "completed",
         "outcome": outcome or "completed", "rows": recorder.count,
+        "units": column_units(recorder),
         "start_time": t0, "stop_time": scene.stop_time,
         "master": {"algorithm": m.algorithm, "step": h, "extrapolation": m.extrapolation,
                    "tolerance": m.tolerance, "fmu_tolerance": m.fmu_tolerance,
@@ -232,14 +238,16 @@ def _run(scene, options, out, log, fmus, system, master, recorder, readers, inte
                            "effects": scene.components[n].effects} for n, f in fmus.items()},
         "versions": versions(), "wall_seconds": wall, "communication_steps": step,
         "statistics": statistics, "master_statistics": master.master_statistics(),
-        "coupling_error": master.coupling_error(), **options.extra_sidecar})
+        "coupling_error": master.coupling_error(), **options.extra_sidecar}
+    if sidecar is not None:
+        write_sidecar(sidecar, metadata)
     if failure:
         raise (RunInterrupted if outcome == "interrupted" else RunError)(failure, csv)
-    png = out.with_suffix(".png") if options.plot else None
+    png = out.with_suffix(".png") if options.plot and out is not None else None
     if png:
         plot(png, recorder, f"{scene.name}: {scene.master.algorithm}, step {h:g} s")
     return RunResult(out, sidecar, png, recorder, statistics, wall, step,
-                     master.master_statistics(), master.coupling_error())
+                     master.master_statistics(), master.coupling_error(), metadata)
 
 
 def _fixed_steps(master, scene: Scene, progress):
