@@ -128,6 +128,49 @@ def style_axes(ax) -> None:
     ax.grid(alpha=0.3)
 
 
+def coincide(x1, y1, x2, y2, rtol: float = 2e-3) -> bool:
+    """Two curves that would be drawn on top of each other: same x range, and on a common grid
+    |y1 - y2| within rtol of the larger curve's span (one line width on a panel)."""
+    x1, y1, x2, y2 = (np.asarray(v, dtype=float) for v in (x1, y1, x2, y2))
+    if len(x1) < 2 or len(x2) < 2 or not (np.isfinite(y1).all() and np.isfinite(y2).all()):
+        return bool(len(x1) == len(x2) and np.array_equal(x1, x2) and np.array_equal(y1, y2))
+    lo, hi = max(x1.min(), x2.min()), min(x1.max(), x2.max())
+    span_x = max(x1.max() - x1.min(), x2.max() - x2.min(), 1e-300)
+    if hi - lo < (1 - rtol) * span_x:
+        return False
+    grid = np.union1d(x1[(x1 >= lo) & (x1 <= hi)], x2[(x2 >= lo) & (x2 <= hi)])
+    a = np.interp(grid, *_sorted(x1, y1))
+    b = np.interp(grid, *_sorted(x2, y2))
+    span = max(np.ptp(y1), np.ptp(y2), 1e-300)
+    return bool(np.max(np.abs(a - b)) <= rtol * span)
+
+
+def _sorted(x, y):
+    k = np.argsort(x, kind="stable")
+    return x[k], y[k]
+
+
+def mark_coinciding(ax) -> list[tuple[str, str]]:
+    """Curves of one panel that lie on top of each other get one legend entry naming all of
+    them ("A = B (curves coincide)"), instead of entries for lines nobody can see; returns the
+    coinciding (first, other) label pairs."""
+    lines = [ln for ln in ax.get_lines() if not ln.get_label().startswith("_")]
+    pairs, merged = [], set()
+    for i, a in enumerate(lines):
+        if id(a) in merged:
+            continue
+        same = [b for b in lines[i + 1:] if id(b) not in merged and
+                coincide(a.get_xdata(), a.get_ydata(), b.get_xdata(), b.get_ydata())]
+        if same:
+            pairs += [(a.get_label(), b.get_label()) for b in same]
+            a.set_label(" = ".join([a.get_label()] + [b.get_label() for b in same])
+                        + " (curves coincide)")
+            for b in same:
+                merged.add(id(b))
+                b.set_label("_" + b.get_label())
+    return pairs
+
+
 def axis_label(name: str, unit: str | None) -> str:
     """`name [unit]` in FMI's unit spelling; `[1]` for a dimensionless value."""
     return f"{name} [{unit or '1'}]"
