@@ -89,3 +89,51 @@ def test_reference_returns_a_result_and_writes_nothing(tmp_path, monkeypatch):
     ref = crankfmu.reference(SERVO, stop_time=0.05, rtol=1e-8)
     assert ref.units["press.w_crank"] == "rad/s" and ref.values["time"][-1] == pytest.approx(0.05)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_steady_state_plot_with_the_reference(tmp_path, fmu_dir):
+    """The servo press at steady state: speed and torque over the last revolutions, the
+    reference drawn over it; coinciding curves get one legend entry saying so."""
+    import matplotlib
+
+    import crankfmu
+    backend = matplotlib.get_backend()
+    run = crankfmu.simulate(SERVO, stop_time=1.3, fmu_dir=fmu_dir)
+    ref = crankfmu.reference(SERVO, stop_time=1.3, rtol=1e-8)
+    fig = run.plot(steady=True, reference=ref)
+    assert matplotlib.get_backend() == backend
+    assert [ax.get_ylabel() for ax in fig.axes] == ["crank speed\npress.w_crank [rad/s]",
+                                                   "drive torque\nmotor.flange_tau [N.m]"]
+    assert "steady state: the last 2 revolutions" in fig.texts[0].get_text()
+    speed_legend = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert speed_legend == ["co-simulation = monolithic reference (curves coincide)"]
+    t0 = fig.axes[0].get_lines()[0].get_xdata()[0]
+    assert 0.5 <= t0 < 0.6  # the run-up from rest ([analysis].from_time = 0.5) is left out
+    phi = run.plot().axes[0]  # the whole run: the crank angle within the revolution
+    assert phi.get_ylabel() == "press.phi mod 2 pi\n[rad]"
+    assert max(phi.get_lines()[0].get_ydata()) < 2 * np.pi
+
+
+def test_coinciding_curves_share_one_legend_entry():
+    from crankfmu.cosim.results import mark_coinciding, new_figure
+    ax = new_figure().subplots()
+    t = np.linspace(0, 1, 50)
+    ax.plot(t, np.sin(t), label="a")
+    ax.plot(t[::7], np.sin(t[::7]) + 1e-6, label="b")
+    ax.plot(t, np.cos(t), label="c")
+    assert mark_coinciding(ax) == [("a", "b")]
+    assert ax.get_legend_handles_labels()[1] == ["a = b (curves coincide)", "c"]
+
+
+def test_run_plot_draws_the_steady_state_with_the_reference_beside(tmp_path, fmu_dir):
+    from crankfmu.cli import main
+    scene = str(SERVO)
+    assert main(["-q", "reference", scene, "--stop-time", "0.8", "--out",
+                 str(tmp_path / "servo_press_reference.csv"), "--rtol", "1e-8"]) == 0
+    assert main(["-q", "run", scene, "--stop-time", "0.8", "--fmus", str(fmu_dir), "--out",
+                 str(tmp_path / "servo_press.csv"), "--plot"]) == 0
+    assert (tmp_path / "servo_press.png").stat().st_size > 10_000
+    from crankfmu.cosim.runner import _reference_beside
+    from crankfmu.cosim.results import Recorder
+    found = _reference_beside(tmp_path / "servo_press.csv", Recorder(["press.w_crank"], ["rad/s"]))
+    assert found is not None and "press.w_crank" in found[0]

@@ -37,6 +37,7 @@ class Result:
     metadata: dict = field(default_factory=dict)        # the JSON sidecar's content
     files: dict = field(default_factory=dict)           # what was written: csv, sidecar, png
     title: str = ""
+    analysis: dict = field(default_factory=dict)        # the scene's [analysis] roles, if any
 
     @property
     def names(self) -> list[str]:
@@ -46,11 +47,27 @@ class Result:
     def __getitem__(self, name: str) -> np.ndarray:
         return self.values[name]
 
-    def plot(self, variables=None):
+    def plot(self, variables=None, *, steady: bool = False, reference: "Result | None" = None,
+             cycles: int = 3):
         """A matplotlib Figure: one panel per recorded variable (or `variables`), each axis
-        with its unit. Not registered with pyplot, so the backend stays as it is; in Jupyter
+        with its unit, a turning crank angle modulo 2 pi. `steady=True`: the periodic steady
+        state instead, crank speed and drive torque over the last `cycles` revolutions (needs
+        the scene's [analysis] roles recorded), with `reference` (crankfmu.reference's Result)
+        drawn over it. Not registered with pyplot, so the backend stays as it is; in Jupyter
         the returned Figure shows inline."""
-        from .cosim.results import figure
+        from .cosim.results import figure, steady_figure
+        if steady:
+            if not self.analysis or not all(self.analysis.get(r) in self.names for r in
+                                            ("crank_angle", "crank_speed", "drive_torque")):
+                raise ValueError("plot(steady=True) needs the scene's [analysis] crank_angle, "
+                                 "crank_speed and drive_torque among the recorded variables")
+            rows = self.values.view(np.float64).reshape(len(self.values), -1)
+            ref = None
+            if reference is not None:
+                ref = (reference.names,
+                       reference.values.view(np.float64).reshape(len(reference.values), -1))
+            return steady_figure(self.names, [self.units[n] for n in self.names], rows,
+                                 self.analysis, self.title, ref, cycles)
         names = list(variables) if variables is not None else self.names
         rows = np.column_stack([self.values["time"]] + [self.values[n] for n in names])
         return figure(names, [self.units[n] for n in names], rows, self.title)
@@ -77,13 +94,15 @@ def structured(names, rows: np.ndarray) -> np.ndarray:
 
 
 def _result(recorder, metadata: dict, files: dict, title: str, statistics=None,
-            coupling_error=None) -> Result:
+            coupling_error=None, scene=None) -> Result:
     from .cosim.results import column_units
+    from .cosim.runner import plot_roles
     return Result(structured(recorder.names, recorder.rows), column_units(recorder),
                   statistics if statistics is not None else metadata.get("statistics", {}),
                   coupling_error if coupling_error is not None
                   else metadata.get("coupling_error", {}),
-                  metadata, {k: v for k, v in files.items() if v is not None}, title)
+                  metadata, {k: v for k, v in files.items() if v is not None}, title,
+                  (plot_roles(scene) or {}) if scene is not None else {})
 
 
 def load_scene(scene):
@@ -136,7 +155,7 @@ def simulate(scene, *, stop_time=None, step=None, algorithm=None, extrapolation=
     return _result(result.recorder, result.metadata,
                    {"csv": result.csv, "sidecar": result.sidecar, "png": result.png},
                    f"{scene.name}: {m.algorithm}, step {m.step:g} s", result.statistics,
-                   result.coupling_error)
+                   result.coupling_error, scene)
 
 
 def reference(scene, *, stop_time=None, parameters=None, inputs=None, rtol=None, method=None,
@@ -153,7 +172,7 @@ def reference(scene, *, stop_time=None, parameters=None, inputs=None, rtol=None,
         write_reference(scene, Path(out), result)
     return _result(result.recorder, metadata, {"csv": result.csv, "sidecar": result.sidecar},
                    f"{scene.name}: monolithic reference, {result.method} rtol {result.rtol:g}",
-                   {}, {})
+                   {}, {}, scene)
 
 
 def accuracy(scene, *, out=None, stop_time=None, parameters=None, inputs=None, **options):

@@ -245,9 +245,35 @@ def _run(scene, options, out, log, fmus, system, master, recorder, readers, inte
         raise (RunInterrupted if outcome == "interrupted" else RunError)(failure, csv)
     png = out.with_suffix(".png") if options.plot and out is not None else None
     if png:
-        plot(png, recorder, f"{scene.name}: {scene.master.algorithm}, step {h:g} s")
+        reference = _reference_beside(out, recorder)
+        plot(png, recorder, f"{scene.name}: {scene.master.algorithm}, step {h:g} s",
+             plot_roles(scene), reference)
     return RunResult(out, sidecar, png, recorder, statistics, wall, step,
                      master.master_statistics(), master.coupling_error(), metadata)
+
+
+def plot_roles(scene: Scene) -> dict | None:
+    """The scene's [analysis] roles (crank angle, speed, torques) for the steady-state plot;
+    None without a complete [analysis] table."""
+    from ..compare import analysis_roles
+    try:
+        return analysis_roles(scene) if "analysis" in scene.raw else None
+    except SceneError:
+        return None
+
+
+def _reference_beside(out: Path, recorder: Recorder):
+    """(names, rows) of `<stem>_reference.csv` beside the run's CSV (crankfmu reference writes
+    it there by default) when it records the same variables; else None."""
+    from .results import read_result_csv
+    path = out.with_name(f"{out.stem}_reference.csv")
+    if not path.is_file():
+        return None
+    try:
+        names, rows = read_result_csv(path)
+    except (OSError, ValueError):
+        return None
+    return (names, rows) if set(recorder.names) <= set(names) and len(rows) > 1 else None
 
 
 def _fixed_steps(master, scene: Scene, progress):
