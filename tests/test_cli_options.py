@@ -98,6 +98,8 @@ def test_warnings_are_shown_without_file_paths(capsys):
     warnings.warn("something odd", RuntimeWarning)
     err = capsys.readouterr().err
     assert err.strip() == "warning: RuntimeWarning: something odd"
+    warnings.warn("iterative master: not converged")
+    assert capsys.readouterr().err.strip() == "warning: iterative master: not converged"
     setup_logging(-2)
     warnings.warn("hidden", RuntimeWarning)
     assert capsys.readouterr().err == ""

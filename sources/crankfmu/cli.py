@@ -148,7 +148,8 @@ def cmd_build(args) -> int:
 def setup_logging(verbosity: int) -> None:
     """crankfmu's messages (logger "crankfmu": FMU builds, notes) on stderr without file paths:
     -q warnings and errors only, default also progress notes, -v debug details. Python
-    warnings go the same way, as `warning: <Category>: <message>` (no site-packages path)."""
+    warnings go the same way, as `warning: <message>` (`warning: <Category>: <message>` for
+    other categories than UserWarning), without the file path and line of the warning."""
     import logging
     import warnings
     level = {-2: logging.ERROR, -1: logging.WARNING, 0: logging.INFO}.get(
@@ -162,7 +163,8 @@ def setup_logging(verbosity: int) -> None:
         logger.propagate = False
 
     def show(message, category, filename, lineno, file=None, line=None):
-        logging.getLogger("crankfmu.warnings").warning("%s: %s", category.__name__, message)
+        kind = "" if category is UserWarning else f"{category.__name__}: "
+        logging.getLogger("crankfmu.warnings").warning("%s%s", kind, message)
     warnings.showwarning = show
 
 
