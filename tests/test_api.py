@@ -137,3 +137,28 @@ def test_run_plot_draws_the_steady_state_with_the_reference_beside(tmp_path, fmu
     from crankfmu.cosim.results import Recorder
     found = _reference_beside(tmp_path / "servo_press.csv", Recorder(["press.w_crank"], ["rad/s"]))
     assert found is not None and "press.w_crank" in found[0]
+
+
+def test_compare_accuracy_and_sweep_write_only_into_out(tmp_path, monkeypatch, fmu_dir):
+    import copy
+
+    import crankfmu
+    monkeypatch.chdir(tmp_path)
+    a = crankfmu.load_scene(SERVO)
+    b = copy.deepcopy(a)
+    b.name = "with_flywheel"
+    b.components["motor"].parameters["J_flywheel"] = 0.1
+    cmp = crankfmu.compare(a, b, stop_time=0.7, fmu_dir=fmu_dir)
+    assert "N.m" in cmp["text"] and cmp["csv"] is None
+    acc = crankfmu.accuracy(SERVO, stop_time=0.05, algorithms=["gauss-seidel"],
+                            extrapolations=[0], steps=[2e-3], fmu_dir=fmu_dir,
+                            reference_rtol=1e-8)
+    assert acc.outcomes[0].ok and acc.csv is None
+    table = crankfmu.sweep(SERVO, ["motor.J_flywheel=0,0.1"], stop_time=0.7, jobs=1,
+                           fmu_dir=fmu_dir, progress=False)
+    assert len(table) == 2 and table.csv is None and table.rows[1]["status"] == "completed"
+    assert list(tmp_path.iterdir()) == []
+    crankfmu.accuracy(SERVO, out=tmp_path / "acc", stop_time=0.05, algorithms=["jacobi"],
+                      extrapolations=[0], steps=[2e-3], fmu_dir=fmu_dir, reference_rtol=1e-8)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["acc"]
+    assert (tmp_path / "acc" / "accuracy.csv").is_file()

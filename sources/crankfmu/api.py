@@ -199,12 +199,15 @@ def compare(scene_a, scene_b, *, stop_time=None, out=None, fmu_dir=None, jobs=1,
     torques and energy per stroke (crankfmu.compare). Returns a dict: "rows" (metric, unit, A,
     B, B - A, relative), "text" (the table), "a" and "b" (the role series); with `out`, the
     folder written (compare.csv, compare.png, both runs' CSVs) and "csv", "png" in it."""
+    import contextlib
+
     from .compare import compare_scenes
     from .cosim.runner import RunOptions
     from .studies.executor import make_executor
     scenes = [prepare(s, stop_time=stop_time) for s in (scene_a, scene_b)]
     options = RunOptions(fmu_dir=fmu_dir, progress=progress)
-    with make_executor(jobs, scheduler) as executor:
+    serial = jobs == 1 and scheduler is None  # one after the other in this process
+    with contextlib.nullcontext() if serial else make_executor(jobs, scheduler) as executor:
         if out is not None:
             return compare_scenes(scenes[0], scenes[1], Path(out), options, executor)
         with tempfile.TemporaryDirectory(prefix="crankfmu-compare-") as tmp:
