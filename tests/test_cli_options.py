@@ -104,3 +104,38 @@ def test_warnings_are_shown_without_file_paths(capsys):
     warnings.warn("hidden", RuntimeWarning)
     assert capsys.readouterr().err == ""
     setup_logging(0)
+
+
+def test_a_build_names_its_sources_and_warns_when_the_tree_differs(tmp_path, capsys):
+    """A non-editable install builds FMUs from its own copy; a source tree beside the scene
+    whose FMU sources differ is named in a warning (an edit there would be thrown away)."""
+    import shutil
+
+    from crankfmu.cli import setup_logging
+    from crankfmu.cosim.wiring import tree_differences, warn_if_tree_differs
+    from crankfmu.fmi.build import PACKAGE_DIR
+    tree = tmp_path / "tree"
+    shutil.copytree(PACKAGE_DIR, tree / "sources" / "crankfmu",
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    assert tree_differences(tree / "sources" / "crankfmu") == []
+    assert tree_differences(PACKAGE_DIR) == []  # the package itself
+    motor = tree / "sources" / "crankfmu" / "physics" / "dc_motor.py"
+    motor.write_text(motor.read_text() + "# an edit\n")
+    assert tree_differences(tree / "sources" / "crankfmu") == ["physics/dc_motor.py"]
+    setup_logging(0)
+    warn_if_tree_differs(tree)
+    err = capsys.readouterr().err
+    assert err.startswith("warning: the FMUs are built from the installed crankfmu at ")
+    assert "physics/dc_motor.py" in err and "pip install -e" in err
+
+
+def test_verbosity_and_the_build_message(tmp_path, capsys):
+    from crankfmu.cli import main
+    fmus = tmp_path / "fmus"
+    assert main(["run", str(SCENARIOS / "servo_press.toml"), "--stop-time", "0.01", "--fmus",
+                 str(fmus), "--out", str(tmp_path / "a.csv"), "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert f"building {fmus / 'DcServoMotor.fmu'} (FMU missing) from " in err
+    assert main(["-q", "run", str(SCENARIOS / "servo_press.toml"), "--stop-time", "0.01",
+                 "--fmus", str(tmp_path / "fmus2"), "--out", str(tmp_path / "b.csv")]) == 0
+    assert "building" not in capsys.readouterr().err
