@@ -123,6 +123,7 @@ def test_coinciding_curves_share_one_legend_entry():
     ax.plot(t, np.cos(t), label="c")
     assert mark_coinciding(ax) == [("a", "b")]
     assert ax.get_legend_handles_labels()[1] == ["a = b (curves coincide)", "c"]
+    assert [ln.get_visible() for ln in ax.get_lines()] == [True, False, True]
 
 
 def test_run_plot_draws_the_steady_state_with_the_reference_beside(tmp_path, fmu_dir):

@@ -152,8 +152,8 @@ def _sorted(x, y):
 
 def mark_coinciding(ax) -> list[tuple[str, str]]:
     """Curves of one panel that lie on top of each other get one legend entry naming all of
-    them ("A = B (curves coincide)"), instead of entries for lines nobody can see; returns the
-    coinciding (first, other) label pairs."""
+    them ("A = B (curves coincide)"), instead of entries for lines nobody can see; the others
+    are hidden, so the curve shown has the entry's colour. Returns the (first, other) pairs."""
     lines = [ln for ln in ax.get_lines() if not ln.get_label().startswith("_")]
     pairs, merged = [], set()
     for i, a in enumerate(lines):
@@ -165,9 +165,10 @@ def mark_coinciding(ax) -> list[tuple[str, str]]:
             pairs += [(a.get_label(), b.get_label()) for b in same]
             a.set_label(" = ".join([a.get_label()] + [b.get_label() for b in same])
                         + " (curves coincide)")
-            for b in same:
+            for b in same:  # not drawn: the legend's colour is the one on the panel
                 merged.add(id(b))
                 b.set_label("_" + b.get_label())
+                b.set_visible(False)
     return pairs
 
 
