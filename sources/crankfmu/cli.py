@@ -10,14 +10,27 @@ from pathlib import Path
 from . import __version__
 
 
-def _add_run_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("scene", type=Path, help="scene file (.toml)")
-    p.add_argument("--out", type=Path, help="CSV to write (default results/<scene>.csv); the "
-                                            "JSON sidecar and PNG go beside it")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="COMP.PARAM=V",
-                   help="override a parameter (repeatable)")
+# -- shared options: one helper per family; each command takes the families that mean something
+# -- to it (tests/test_cli_options.py checks that every option a command accepts is read by it)
+def add_scene_options(p: argparse.ArgumentParser, scene_help: str = "scene file (.toml or .ssp)"
+                      ) -> None:
+    """The scene and what changes it: --set, --stop-time (every command that loads one)."""
+    p.add_argument("scene", type=Path, help=scene_help)
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="REF=V",
+                   help="override comp.param=V (a parameter), comp.input=V (an unconnected "
+                        "input, held constant) or master.key=V (a [master] key, e.g. "
+                        "master.step=2e-3); repeatable")
     p.add_argument("--stop-time", type=float, help="end of the run [s]")
-    p.add_argument("--step", type=float, help="communication step [s]")
+
+
+def add_step_option(p: argparse.ArgumentParser, help: str = "communication step [s] "
+                    "([master].step)") -> None:
+    p.add_argument("--step", type=float, help=help)
+
+
+def add_master_options(p: argparse.ArgumentParser) -> None:
+    """How the master runs the scene (run, export-ssp)."""
+    add_step_option(p)
     from .cosim.masters import MASTERS
     p.add_argument("--algorithm", choices=sorted(MASTERS),
                    help="master algorithm ([master].algorithm)")
@@ -30,9 +43,32 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
                    help="each FMU's internal relative tolerance ([master].fmu_tolerance)")
     p.add_argument("--max-steps", type=int, help="the most communication steps the run may take "
                    "([master].max_steps; default 10,000,000)")
-    p.add_argument("--fmus", type=Path, help="folder of built FMUs (default fmus/ beside scenarios/)")
-    p.add_argument("--plot", action="store_true", help="also write a PNG of the recorded variables")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def add_fmu_option(p: argparse.ArgumentParser) -> None:
+    """Where the built FMUs are (every command that loads FMUs)."""
+    p.add_argument("--fmus", type=Path, help="folder of built FMUs (default fmus/ beside "
+                                             "scenarios/; catalog FMUs are built there if stale)")
+
+
+def add_output_options(p: argparse.ArgumentParser, out_help: str, plot_help: str | None = None,
+                       progress: bool = True) -> None:
+    """--out (always with a default under results/), --plot, --no-progress."""
+    p.add_argument("--out", type=Path, help=out_help)
+    if plot_help:
+        p.add_argument("--plot", action="store_true", help=plot_help)
+    if progress:
+        p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _add_run_options(p: argparse.ArgumentParser) -> None:
+    """`crankfmu run`'s options."""
+    add_scene_options(p)
+    add_master_options(p)
+    add_fmu_option(p)
+    add_output_options(p, "CSV to write (default results/<scene name>.csv); the JSON sidecar "
+                          "and the PNG go beside it",
+                       "also write a PNG of the recorded variables")
     p.add_argument("--log", action="store_true", help="print the FMUs' log messages")
 
 
@@ -71,7 +107,8 @@ def cmd_run(args) -> int:
     from .cosim.runner import RunOptions, run_scene
 
     scene = load_with_options(args)
-    result = run_scene(scene, RunOptions(out=args.out, plot=args.plot, fmu_dir=args.fmus,
+    out = args.out or Path("results") / f"{scene.name}.csv"
+    result = run_scene(scene, RunOptions(out=out, plot=args.plot, fmu_dir=args.fmus,
                                          progress=False if args.no_progress else None,
                                          verbose_log=args.log))
     m = scene.master
@@ -96,15 +133,73 @@ def cmd_run(args) -> int:
 
 
 def cmd_build(args) -> int:
-    from .fmi.build import build_all
+    import logging
 
+    from .fmi.build import PACKAGE_DIR, build_all
+
+    logging.getLogger("crankfmu").info("building FMUs from the crankfmu sources at %s",
+                                       PACKAGE_DIR)
+    from .cosim.wiring import warn_if_tree_differs
+    warn_if_tree_differs(Path.cwd())
     build_all(args.dest, args.models or None)
     return 0
+
+
+def setup_logging(verbosity: int) -> None:
+    """crankfmu's messages (logger "crankfmu": FMU builds, notes) on stderr without file paths:
+    -q warnings and errors only, default also progress notes, -v debug details. Python
+    warnings go the same way, as `warning: <message>` (`warning: <Category>: <message>` for
+    other categories than UserWarning), without the file path and line of the warning."""
+    import logging
+    import warnings
+    level = {-2: logging.ERROR, -1: logging.WARNING, 0: logging.INFO}.get(
+        max(-2, min(verbosity, 1)), logging.DEBUG)
+    logger = logging.getLogger("crankfmu")
+    logger.setLevel(level)
+    if not any(getattr(h, "_crankfmu", False) for h in logger.handlers):
+        handler = _StderrHandler()
+        handler._crankfmu = True
+        logger.addHandler(handler)
+        logger.propagate = False
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        kind = "" if category is UserWarning else f"{category.__name__}: "
+        logging.getLogger("crankfmu.warnings").warning("%s%s", kind, message)
+    warnings.showwarning = show
+
+
+def _StderrHandler():
+    """A logging handler writing to the current sys.stderr (as print does): `message` for
+    notes, `warning: message` / `error: message` above them."""
+    import logging
+
+    class Handler(logging.Handler):
+        def emit(self, record) -> None:
+            try:
+                print(_format(record), file=sys.stderr)
+            except Exception:  # noqa: BLE001 - as logging.Handler.handleError does
+                self.handleError(record)
+    return Handler()
+
+
+def _format(record) -> str:
+    import logging
+    text = record.getMessage()
+    if record.levelno >= logging.ERROR:
+        return f"error: {text}"
+    if record.levelno >= logging.WARNING:
+        return f"warning: {text}"
+    return text
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="crankfmu", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"crankfmu {__version__}")
+    parser.add_argument("-v", "--verbose", action="count", default=0,
+                        help="more messages (debug details)")
+    parser.add_argument("-q", "--quiet", action="count", default=0,
+                        help="fewer messages: warnings and errors only (-qq: errors only); "
+                             "no progress bars")
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="run a scene")
     _add_run_options(run)
@@ -129,6 +224,9 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:  # Ctrl-C while the commands are imported
         print("error: interrupted (Ctrl-C)", file=sys.stderr)
         return 130
+    setup_logging(args.verbose - args.quiet)
+    if args.quiet and hasattr(args, "no_progress"):
+        args.no_progress = True
     try:
         return args.func(args)
     except CrankfmuError as err:

@@ -6,9 +6,9 @@ here (the same press may be driven through different components):
     [analysis]
     crank_angle  = "press.phi"          # rad, continuous: strokes are its full revolutions
     crank_speed  = "press.w_crank"      # rad/s
-    drive_torque = "motor.flange_tau"   # N m, the motor's torque
+    drive_torque = "motor.flange_tau"   # N.m, the motor's torque
     drive_power  = "motor.P_shaft"      # W, the motor's shaft power: energy per stroke
-    load_torque  = "press.M_C"          # N m, optional: the press's resistance moment
+    load_torque  = "press.M_C"          # N.m, optional: the press's resistance moment
     from_time    = 0.5                  # s, optional (default start_time): skip a run-up
     events       = ["drive.E_brake_b", "drive.n_events"]   # optional, hybrid scenes: recorded
                                         # variables reported at the run's end (a sweep's columns)
@@ -173,7 +173,7 @@ def metrics(s: Series) -> dict:
 
 
 UNITS = {"strokes": "1", "cycle_time": "s", "mean_crank_speed": "rad/s", "delta": "1",
-         "peak_drive_torque": "N m", "peak_load_torque": "N m", "energy_per_stroke": "J",
+         "peak_drive_torque": "N.m", "peak_load_torque": "N.m", "energy_per_stroke": "J",
          "window_start": "s", "window_end": "s", "max_crank_speed_difference": "rad/s"}
 
 
@@ -219,24 +219,30 @@ def write_table(path: Path, rows, la: str, lb: str) -> None:
 
 
 def overlay_plot(path: Path, a: Series, b: Series, title: str) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    panels = [("crank_speed", "crank speed [rad/s]"), ("drive_torque", "motor torque [N m]")]
+    overlay_figure(a, b, title).savefig(path, dpi=110)
+
+
+def overlay_figure(a: Series, b: Series, title: str):
+    """Crank speed, motor torque (and the press moment) of both runs over time; a panel where
+    the two runs' curves coincide says so in its legend."""
+    from .cosim.results import axis_label, mark_coinciding, new_figure, style_axes
+    panels = [("crank_speed", axis_label("crank speed", "rad/s")),
+              ("drive_torque", axis_label("motor torque", "N.m"))]
     if "load_torque" in a.values and "load_torque" in b.values:
-        panels.append(("load_torque", "press moment M_C [N m]"))
-    fig, axes = plt.subplots(len(panels), 1, sharex=True, figsize=(9, 2.6 * len(panels)))
+        panels.append(("load_torque", axis_label("press moment M_C", "N.m")))
+    fig = new_figure(figsize=(9, 2.6 * len(panels)))
+    axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
     for ax, (role, label) in zip(axes, panels):
+        style_axes(ax)
         for s, style in ((a, "-"), (b, "--")):
             ax.plot(s.time, s.values[role], style, lw=1.0, label=s.label)
         ax.set_ylabel(label)
-        ax.grid(alpha=0.3)
-    axes[0].legend(loc="best")
+        mark_coinciding(ax)
+        ax.legend(loc="best", fontsize=8)
     axes[0].set_title(title)
-    axes[-1].set_xlabel("time [s]")
+    axes[-1].set_xlabel(axis_label("time", "s"))
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    return fig
 
 
 def compare_scenes(scene_a, scene_b, out_dir: Path, options, executor=None) -> dict:

@@ -52,9 +52,7 @@ def plot_work_precision(path: Path, outcomes: list[Outcome], metric_text: str,
                         target: float | None, title: str) -> None:
     """Error against wall time (left) and against doStep calls (right), log-log, one line per
     master / extrapolation / FMU tolerance."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from ..cosim.results import PALETTE, new_figure
 
     groups: dict[tuple, list[Outcome]] = {}
     for o in outcomes:
@@ -62,10 +60,11 @@ def plot_work_precision(path: Path, outcomes: list[Outcome], metric_text: str,
             s = o.setting
             groups.setdefault((s.algorithm, s.extrapolation, s.fmu_tolerance), []).append(o)
     several_ft = len({k[2] for k in groups}) > 1
-    fig, axes = plt.subplots(1, 2, figsize=(12, 5.5), sharey=True)
+    fig = new_figure(figsize=(12, 5.5))
+    axes = fig.subplots(1, 2, sharey=True)
     # colour per master, line style and marker per extrapolation order
     masters = sorted({k[0] for k in groups})
-    colours = {m: f"C{i % 10}" for i, m in enumerate(masters)}
+    colours = {m: PALETTE[i % len(PALETTE)] for i, m in enumerate(masters)}
     styles = {0: ("-", "o"), 1: ("--", "s"), 2: (":", "^")}
     for key, group in sorted(groups.items()):
         # along the knob (coarse to fine), so timing noise shows as noise, not as a new order
@@ -87,4 +86,3 @@ def plot_work_precision(path: Path, outcomes: list[Outcome], metric_text: str,
     fig.suptitle(f"{title}\nerror = {metric_text}", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)

@@ -25,15 +25,14 @@ def _names(text: str) -> list[str]:
 
 def register(sub) -> None:
     from ..accuracy import DEFAULT_STEP_FACTORS, DEFAULT_TARGET, DEFAULT_TOLERANCES, METRICS
-    from ..cli import _add_run_options
+    from ..cli import add_fmu_option, add_output_options, add_scene_options
 
     p = sub.add_parser("accuracy", help="error vs wall time of master settings against the "
                                         "monolithic reference (work-precision)")
-    _add_run_options(p)
-    for action in p._actions:  # run's --out is a CSV; here it is the output folder
-        if action.dest == "out":
-            action.help = "output folder (default results/<scene>_accuracy): accuracy.csv, " \
-                          "work_precision.png, reference.csv (cache), runs/"
+    add_scene_options(p)
+    add_fmu_option(p)
+    add_output_options(p, "output folder (default results/<scene name>_accuracy): "
+                          "accuracy.csv, work_precision.png, reference.csv (cache), runs/")
     p.add_argument("--algorithms", type=_names,
                    help="comma list (default: every available master)")
     p.add_argument("--extrapolations", type=_ints, help="comma list of 0, 1, 2 (default all)")
@@ -71,10 +70,9 @@ def run_accuracy_command(args) -> int:
     scene = load_with_options(args)
     options = AccuracyOptions(
         out_dir=args.out or Path("results") / f"{scene.name}_accuracy",
-        algorithms=args.algorithms or ([args.algorithm] if args.algorithm else None),
-        extrapolations=args.extrapolations or ([args.extrapolation] if args.extrapolation
-                                               is not None else [0, 1, 2]),
-        steps=args.steps or ([args.step] if args.step else None),
+        algorithms=args.algorithms,
+        extrapolations=args.extrapolations or [0, 1, 2],
+        steps=args.steps,
         fmu_tolerances=args.fmu_tolerances, metric=args.metric, variables=args.variables,
         cycles=args.cycles, target=args.target, reference_rtol=args.rtol,
         floor_factor=args.floor_factor, fmu_dir=args.fmus,

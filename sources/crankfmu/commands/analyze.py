@@ -14,11 +14,11 @@ def register(sub) -> None:
     what = p.add_subparsers(dest="analysis", required=True)
     impact = what.add_parser("impact", help="MO-100 table: Pm, tau, Tm, Tm/Pm, max dP, max dT "
                                             "per k_n, both readings of S, and the paper's claims")
-    for name, unit in (("J", "kg m^2"), ("m", "kg"), ("r", "m"), ("R_c", "m"), ("d", "m"),
-                       ("E", "Pa"), ("rho", "kg/m^3"), ("nu", "1"), ("V0", "m/s")):
+    for name, unit in (("J", "kg.m2"), ("m", "kg"), ("r", "m"), ("R_c", "m"), ("d", "m"),
+                       ("E", "Pa"), ("rho", "kg/m3"), ("nu", "1"), ("V0", "m/s")):
         impact.add_argument(f"--{name}", type=float, help=f"[{unit}] (default: MO-100)")
     impact.add_argument("--k-n", type=float, nargs="+", default=[40e6, 80e6, 160e6],
-                        help="support constants k_n [N^(2/3)/m]")
+                        help="support constants k_n [N(2/3)/m]")
     impact.add_argument("--S-factor", type=float, nargs="+", default=[1.1, 0.9],
                         help="strike distance S as a multiple of the centre of percussion J/(m r)")
     impact.set_defaults(func=run_impact)
@@ -104,11 +104,19 @@ def format_blows(blows: list[dict], title: str) -> str:
 def plot_hammer(runs: dict[str, dict], png: Path, comp: str = "hammer") -> None:
     """Motor torque and load torque; crank speed; P and T peaks of each blow (markers at the
     time the blow was seen) for one or more runs."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    hammer_figure(runs, comp).savefig(png, dpi=110)
 
-    fig, ax = plt.subplots(3, 1, figsize=(9, 7.5), sharex=True)
+
+def hammer_figure(runs: dict[str, dict], comp: str = "hammer"):
+    """The figure of plot_hammer (a matplotlib Figure; the backend is left alone). Curves that
+    lie on top of each other (the same torque in two runs, a T peak equal to the P peak) get
+    one legend entry saying they coincide."""
+    from ..cosim.results import axis_label, mark_coinciding, new_figure, style_axes
+
+    fig = new_figure(figsize=(9, 7.5))
+    ax = fig.subplots(3, 1, sharex=True)
+    for a in ax:
+        style_axes(a)
     for label, col in runs.items():
         t = col["time"]
         ax[0].plot(t, col["motor.flange_tau"], lw=1.0, label=f"motor torque ({label})")
@@ -118,18 +126,17 @@ def plot_hammer(runs: dict[str, dict], png: Path, comp: str = "hammer") -> None:
         tb = [b["t"] for b in blows]
         ax[2].plot(tb, [b["P_peak"] / 1e3 for b in blows], "o-", ms=4, label=f"P peak ({label})")
         ax[2].plot(tb, [b["T_peak"] / 1e3 for b in blows], "s--", ms=4, label=f"T peak ({label})")
-    ax[0].set_ylabel("torque on the\nmotor shaft [N m]")
+    ax[0].set_ylabel(axis_label("torque on the\nmotor shaft", "N.m"))
     ax[0].set_ylim(-60, 120)
-    ax[1].set_ylabel("crank speed [rad/s]")
-    ax[2].set_ylabel("force per blow [kN]")
-    ax[2].set_xlabel("time [s]")
+    ax[1].set_ylabel(axis_label("crank speed", "rad/s"))
+    ax[2].set_ylabel(axis_label("force per blow", "kN"))
+    ax[2].set_xlabel(axis_label("time", "s"))
     for a in ax:
-        a.grid(alpha=0.3)
+        mark_coinciding(a)
         a.legend(fontsize=7, loc="best")
     ax[0].set_title("Crank-rocker hammer: DC motor, spring rod, MO-100 rocker (Hertz contact)")
     fig.tight_layout()
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
+    return fig
 
 
 def run_hammer(args) -> int:

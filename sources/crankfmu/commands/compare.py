@@ -1,4 +1,4 @@
-"""`crankfmu compare A.toml B.toml --out DIR`: run two scenes (a component swap) and report the
+"""`crankfmu compare A.toml B.toml [--out DIR]`: run two scenes (a component swap) and report the
 differences that matter (sources/crankfmu/compare.py): table printed and in DIR/compare.csv,
 overlay plot DIR/compare.png, both runs' CSVs in DIR."""
 from __future__ import annotations
@@ -11,10 +11,11 @@ def register(sub) -> None:
                                        "cycle time, speeds, delta, peak torques, energy per stroke")
     p.add_argument("scene_a", type=Path, help="scene A (.toml; needs an [analysis] table)")
     p.add_argument("scene_b", type=Path, help="scene B (.toml; e.g. one with a [swap] table)")
-    p.add_argument("--out", type=Path, required=True, help="folder for the CSVs and the PNG")
     p.add_argument("--stop-time", type=float, help="end of both runs [s]")
-    p.add_argument("--fmus", type=Path, help="folder of built FMUs (default fmus/ beside scenarios/)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    from ..cli import add_fmu_option, add_output_options
+    add_fmu_option(p)
+    add_output_options(p, "folder for compare.csv, compare.png and both runs' CSVs (default "
+                          "results/<A name>_vs_<B name>)")
     from .sweep import add_executor_options
     add_executor_options(p, "two runs")
     p.set_defaults(func=run_compare)
@@ -33,8 +34,9 @@ def run_compare(args) -> int:
             sc.stop_time = args.stop_time
     from ..studies.executor import make_executor
     options = RunOptions(fmu_dir=args.fmus, progress=False if args.no_progress else None)
+    out = args.out or Path("results") / f"{scenes[0].name}_vs_{scenes[1].name}"
     with make_executor(args.jobs, args.scheduler) as executor:
-        result = compare_scenes(scenes[0], scenes[1], args.out, options, executor)
+        result = compare_scenes(scenes[0], scenes[1], out, options, executor)
     print(result["text"])
-    print(f"wrote {result['csv']}, {result['png']} and the runs' CSVs in {args.out}")
+    print(f"wrote {result['csv']}, {result['png']} and the runs' CSVs in {out}")
     return 0

@@ -10,18 +10,11 @@ def register(sub) -> None:
                                    "connections, parameter values, default experiment) and the "
                                    "FMUs into a .ssp that fmpy, libcosim and ecos load and "
                                    "`crankfmu run` runs back. See docs/ssp.md.")
-    p.add_argument("scene", type=Path, help="scene file (.toml or .ssp)")
-    p.add_argument("--out", type=Path, help="archive to write (default results/<scene name>.ssp)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="COMP.PARAM=V",
-                   help="override a parameter before export (repeatable)")
-    p.add_argument("--stop-time", type=float, help="end of the run [s]")
-    p.add_argument("--step", type=float, help="communication step [s]")
-    p.add_argument("--algorithm", help="master algorithm")
-    p.add_argument("--extrapolation", type=int, choices=(0, 1, 2), help="input extrapolation order")
-    p.add_argument("--tolerance", type=float, help="[master].tolerance")
-    p.add_argument("--fmu-tolerance", type=float, help="[master].fmu_tolerance")
-    p.add_argument("--fmus", type=Path, help="folder of built FMUs (default fmus/ beside "
-                                             "scenarios/); catalog FMUs are built there if stale")
+    from ..cli import add_fmu_option, add_master_options, add_output_options, add_scene_options
+    add_scene_options(p)
+    add_master_options(p)
+    add_fmu_option(p)
+    add_output_options(p, "archive to write (default results/<scene name>.ssp)", progress=False)
     p.set_defaults(func=run_export)
 
 

@@ -7,11 +7,16 @@ from pathlib import Path
 
 
 def register(sub) -> None:
-    from ..cli import _add_run_options
+    from ..cli import add_output_options, add_scene_options, add_step_option
     from ..reference import DEFAULT_RTOL
 
     p = sub.add_parser("reference", help="monolithic reference of a scene (one ODE, scipy)")
-    _add_run_options(p)
+    add_scene_options(p)
+    add_step_option(p, "record grid: the run's communication step [s] ([master].step), so "
+                       "reference and run CSVs line up row by row")
+    add_output_options(p, "CSV to write (default results/<scene name>_reference.csv); the "
+                          "JSON sidecar and the PNG go beside it",
+                       "also write a PNG of the recorded variables")
     p.add_argument("--rtol", type=float, default=DEFAULT_RTOL,
                    help=f"relative tolerance of the solver (default {DEFAULT_RTOL:g}; absolute "
                         "tolerance rtol times each state's nominal value)")

@@ -1,4 +1,4 @@
-"""`crankfmu sweep SCENE --vary COMP.PARAM=V1,V2,... --out DIR`: many runs of one scene on all
+"""`crankfmu sweep SCENE --vary COMP.PARAM=V1,V2,... [--out DIR]`: many runs of one scene on all
 cores (or a Dask cluster), one row each in DIR/sweep.csv with the scene's [analysis] figures,
 and DIR/sweep.png (crankfmu/studies/sweep.py)."""
 from __future__ import annotations
@@ -26,21 +26,20 @@ def add_executor_options(p, what: str = "runs") -> None:
 def register(sub) -> None:
     p = sub.add_parser("sweep", help="parameter sweep of a scene on all cores or a Dask cluster: "
                                      "one row of [analysis] figures per run")
-    p.add_argument("scene", type=Path, help="scene file (.toml, with an [analysis] table)")
+    from ..cli import add_fmu_option, add_scene_options
+    add_scene_options(p, "scene file (.toml, with an [analysis] table)")
     p.add_argument("--vary", action="append", required=True, metavar="COMP.PARAM=VALUES",
                    help="V1,V2,... or START:STOP:N (linear, ends included); repeatable: the "
                         "full-factorial grid")
     p.add_argument("--samples", type=int,
                    help="Latin hypercube of N points over the --vary ranges instead of the grid")
     p.add_argument("--seed", type=int, default=0, help="seed of the Latin hypercube (default 0)")
-    p.add_argument("--out", type=Path, required=True,
-                   help="folder: sweep.csv, sweep.json, sweep.png (an interrupted sweep resumes)")
-    p.add_argument("--stop-time", type=float, help="end of every run [s]")
+    p.add_argument("--out", type=Path,
+                   help="folder: sweep.csv, sweep.json, sweep.png (default results/<scene "
+                        "name>_sweep; an interrupted sweep resumes)")
     p.add_argument("--from-time", type=float,
                    help="start of the analysis window [s] (default [analysis].from_time)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="COMP.PARAM=V",
-                   help="fixed parameter for every run (repeatable)")
-    p.add_argument("--fmus", type=Path, help="folder of built FMUs (default fmus/ beside scenarios/)")
+    add_fmu_option(p)
     add_executor_options(p)
     p.add_argument("--no-plot", action="store_true", help="no sweep.png")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -52,8 +51,13 @@ def run_sweep(args) -> int:
 
     from ..studies.sweep import SweepError, sweep
 
+    from ..scenario.scene import load_scene
+
+    out = args.out
+    if out is None:
+        out = Path("results") / f"{load_scene(args.scene).name}_sweep"
     try:
-        table = sweep(args.scene, args.vary, args.out, jobs=args.jobs, scheduler=args.scheduler,
+        table = sweep(args.scene, args.vary, out, jobs=args.jobs, scheduler=args.scheduler,
                       stop_time=args.stop_time, from_time=args.from_time, samples=args.samples,
                       seed=args.seed, overrides=args.overrides, fmu_dir=args.fmus,
                       progress=False if args.no_progress else None, plot=not args.no_plot)

@@ -35,6 +35,17 @@ class Recorder:
         return self.rows[:, 1 + self.names.index(name)]
 
 
+def normalize_unit(unit: str | None) -> str:
+    """A unit in FMI's spelling (the modelDescription's): "1" for a dimensionless value."""
+    return unit or "1"
+
+
+def column_units(recorder: Recorder) -> dict[str, str]:
+    """Unit of every CSV column, "time" first (the sidecar's "units")."""
+    return {"time": "s", **{n: normalize_unit(u) for n, u in zip(recorder.names,
+                                                                 recorder.units)}}
+
+
 def atomic_write(path: Path, write) -> None:
     """Write through a temporary file in the same folder, then rename it onto `path`: a reader
     (or a crash) sees the old file or the new one, never a half-written one."""
@@ -99,21 +110,176 @@ def write_sidecar(path: Path, payload: dict) -> None:
     atomic_write(path, lambda f: f.write(text))
 
 
-def plot(path: Path, recorder: Recorder, title: str) -> None:
-    """One panel per recorded variable, with units, over time."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+# Okabe & Ito's colour-blind-safe palette (black first is left out: it is the grid's colour)
+PALETTE = ("#0072B2", "#E69F00", "#009E73", "#D55E00", "#CC79A7", "#56B4E9", "#F0E442",
+           "#000000")
 
-    n = len(recorder.names)
-    fig, axes = plt.subplots(n, 1, figsize=(9, 1.9 * n + 0.8), sharex=True, squeeze=False)
-    t = recorder.rows[:, 0]
-    for ax, name, unit, k in zip(axes[:, 0], recorder.names, recorder.units, range(n)):
-        ax.plot(t, recorder.rows[:, k + 1], lw=1.0)
-        ax.set_ylabel(f"{name}\n[{unit or '1'}]", fontsize=8)
-        ax.grid(alpha=0.3)
-    axes[-1, 0].set_xlabel("time [s]")
+
+def new_figure(**kwargs):
+    """A matplotlib Figure that is not registered with pyplot: making, saving or returning it
+    never selects or changes the backend (inline plots in Jupyter keep working), and it is freed
+    like any object."""
+    from matplotlib.figure import Figure
+    return Figure(**kwargs)
+
+
+def style_axes(ax) -> None:
+    ax.set_prop_cycle(color=PALETTE)
+    ax.grid(alpha=0.3)
+
+
+def coincide(x1, y1, x2, y2, rtol: float = 5e-3) -> bool:
+    """Two curves that would be drawn on top of each other: same x range, and on a common grid
+    |y1 - y2| within rtol of the larger curve's span (one line width on a panel)."""
+    x1, y1, x2, y2 = (np.asarray(v, dtype=float) for v in (x1, y1, x2, y2))
+    if len(x1) < 2 or len(x2) < 2 or not (np.isfinite(y1).all() and np.isfinite(y2).all()):
+        return bool(len(x1) == len(x2) and np.array_equal(x1, x2) and np.array_equal(y1, y2))
+    lo, hi = max(x1.min(), x2.min()), min(x1.max(), x2.max())
+    span_x = max(x1.max() - x1.min(), x2.max() - x2.min(), 1e-300)
+    if hi - lo < (1 - rtol) * span_x:
+        return False
+    grid = np.union1d(x1[(x1 >= lo) & (x1 <= hi)], x2[(x2 >= lo) & (x2 <= hi)])
+    a = np.interp(grid, *_sorted(x1, y1))
+    b = np.interp(grid, *_sorted(x2, y2))
+    span = max(np.ptp(y1), np.ptp(y2), 1e-300)
+    return bool(np.max(np.abs(a - b)) <= rtol * span)
+
+
+def _sorted(x, y):
+    k = np.argsort(x, kind="stable")
+    return x[k], y[k]
+
+
+def mark_coinciding(ax) -> list[tuple[str, str]]:
+    """Curves of one panel that lie on top of each other get one legend entry naming all of
+    them ("A = B (curves coincide)"), instead of entries for lines nobody can see; the others
+    are hidden, so the curve shown has the entry's colour. Returns the (first, other) pairs."""
+    lines = [ln for ln in ax.get_lines() if not ln.get_label().startswith("_")]
+    pairs, merged = [], set()
+    for i, a in enumerate(lines):
+        if id(a) in merged:
+            continue
+        same = [b for b in lines[i + 1:] if id(b) not in merged and
+                coincide(a.get_xdata(), a.get_ydata(), b.get_xdata(), b.get_ydata())]
+        if same:
+            pairs += [(a.get_label(), b.get_label()) for b in same]
+            a.set_label(" = ".join([a.get_label()] + [b.get_label() for b in same])
+                        + " (curves coincide)")
+            for b in same:  # not drawn: the legend's colour is the one on the panel
+                merged.add(id(b))
+                b.set_label("_" + b.get_label())
+                b.set_visible(False)
+    return pairs
+
+
+def axis_label(name: str, unit: str | None) -> str:
+    """`name [unit]` in FMI's unit spelling; `[1]` for a dimensionless value."""
+    return f"{name} [{unit or '1'}]"
+
+
+def is_running_angle(unit: str | None, values: np.ndarray) -> bool:
+    """An angle that keeps turning (a crank's): more than two revolutions recorded."""
+    return unit == "rad" and len(values) > 1 and np.ptp(values) > 4 * np.pi
+
+
+def figure(names, units, rows: np.ndarray, title: str):
+    """One panel per recorded variable over time, each axis labelled with its unit; an angle
+    that keeps turning is drawn modulo 2 pi (its position in the revolution), not as a ramp.
+    Returns the Figure (new_figure: the backend is left alone)."""
+    n = len(names)
+    fig = new_figure(figsize=(9, 1.9 * n + 0.8))
+    axes = fig.subplots(n, 1, sharex=True, squeeze=False)
+    t = rows[:, 0]
+    for ax, name, unit, k in zip(axes[:, 0], names, units, range(n)):
+        style_axes(ax)
+        y = rows[:, k + 1]
+        if is_running_angle(unit, y):
+            ax.plot(t, np.mod(y, 2 * np.pi), ".", ms=1.0)
+            name = f"{name} mod 2 pi"
+        else:
+            ax.plot(t, y, lw=1.0)
+        ax.set_ylabel(axis_label(name, unit).replace(" [", "\n["), fontsize=8)
+    axes[-1, 0].set_xlabel(axis_label("time", "s"))
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
+    return fig
+
+
+STEADY_ROLES = (("crank_speed", "crank speed"), ("drive_torque", "drive torque"),
+                ("load_torque", "load torque"))
+
+
+def steady_window(time: np.ndarray, angle: np.ndarray, cycles: int = 3,
+                  from_time: float | None = None) -> tuple[float, float]:
+    """The last `cycles` whole revolutions of the crank angle after `from_time` (the end of the
+    run-up, [analysis].from_time), fewer if the run has fewer; all of the run after from_time
+    if it holds no whole revolution."""
+    end = float(time[-1])
+    start = float(time[0]) if from_time is None else min(max(from_time, float(time[0])), end)
+    order = np.maximum.accumulate(angle)  # a monotone copy for the interpolation
+    turned = angle[-1] - float(np.interp(start, time, angle))
+    turns = min(cycles, int(turned / (2 * np.pi)))
+    if turns < 1:
+        return start, end
+    return max(start, float(np.interp(angle[-1] - 2 * np.pi * turns, order, time))), end
+
+
+def steady_figure(names, units, rows: np.ndarray, roles: dict, title: str, reference=None,
+                  cycles: int = 3):
+    """The periodic steady state: crank speed and drive torque (and the load torque when
+    recorded) over the last `cycles` revolutions, against the crank angle in the revolution;
+    `reference` (names, rows) of the monolithic reference is drawn over it, dashed, and a panel
+    where run and reference coincide says so. `roles`: the scene's [analysis] table
+    (crank_angle, crank_speed, drive_torque, optional load_torque)."""
+    col = {n: rows[:, k + 1] for k, n in enumerate(names)}
+    unit = dict(zip(names, units))
+    t = rows[:, 0]
+    angle = col[roles["crank_angle"]]
+    t0, t1 = steady_window(t, angle, cycles, roles.get("from_time"))
+    panels = [(r, label) for r, label in STEADY_ROLES if roles.get(r) in col]
+    fig = new_figure(figsize=(9, 2.4 * len(panels) + 0.9))
+    axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
+    series = [("co-simulation", t, col, "-")]
+    if reference is not None:
+        ref_names, ref_rows = reference
+        series.append(("monolithic reference", ref_rows[:, 0],
+                       {n: ref_rows[:, k + 1] for k, n in enumerate(ref_names)}, "--"))
+    for ax, (role, label) in zip(axes, panels):
+        style_axes(ax)
+        var = roles[role]
+        for name, tt, cc, style in series:
+            if var not in cc or roles["crank_angle"] not in cc:
+                continue
+            window = (tt >= t0 - 1e-12) & (tt <= t1 + 1e-12)
+            ax.plot(tt[window], cc[var][window], style, lw=1.0, label=name)
+        ax.set_ylabel(axis_label(f"{label}\n{var}", unit.get(var)), fontsize=8)
+        if len(series) > 1:
+            mark_coinciding(ax)
+            ax.legend(fontsize=7, loc="best")
+    revs = (angle[-1] - float(np.interp(t0, t, angle))) / (2 * np.pi)
+    axes[-1].set_xlabel(axis_label("time", "s"))
+    fig.suptitle(f"{title}\nsteady state: the last {revs:.3g} revolutions "
+                 f"(t = {t0:.3g} to {t1:.3g} s)", fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def read_result_csv(path: Path) -> tuple[list[str], np.ndarray]:
+    """(names without "time", rows) of a CSV in the runner's layout."""
+    with open(path) as f:
+        header = f.readline().strip().split(",")
+    rows = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    return [h.strip('"') for h in header[1:]], rows
+
+
+def plot(path: Path, recorder: Recorder, title: str, roles: dict | None = None,
+         reference=None) -> None:
+    """A PNG: the steady state (steady_figure) when `roles` name a recorded crank angle, speed
+    and drive torque, else one panel per recorded variable, with units, over time."""
+    if roles and all(roles.get(r) in recorder.names
+                     for r in ("crank_angle", "crank_speed", "drive_torque")):
+        fig = steady_figure(recorder.names, recorder.units, recorder.rows, roles, title,
+                            reference)
+    else:
+        fig = figure(recorder.names, recorder.units, recorder.rows, title)
     fig.savefig(path, dpi=110)
-    plt.close(fig)

@@ -16,7 +16,8 @@ from ..errors import CrankfmuError, InterruptedRun
 from ..scenario.scene import Scene, SceneError, check_run_size
 from .fmu import FmuInstance, LogCollector
 from .masters import DivergenceError, make_master
-from .results import Recorder, plot, versions, write_csv, write_sidecar
+from .results import (Recorder, column_units, normalize_unit, plot, versions, write_csv,
+                      write_sidecar)
 from .wiring import (System, check_components, check_links, check_loops, check_physics,
                      default_fmu_dir, resolve_fmu)
 
@@ -48,8 +49,8 @@ class NonFiniteValue(DivergenceError):
 
 @dataclass
 class RunResult:
-    csv: Path
-    sidecar: Path
+    csv: Path | None       # None: nothing was written (RunOptions.out None)
+    sidecar: Path | None
     png: Path | None
     recorder: Recorder
     statistics: dict
@@ -57,12 +58,13 @@ class RunResult:
     steps: int
     master_statistics: dict = field(default_factory=dict)
     coupling_error: dict = field(default_factory=dict)
+    metadata: dict = field(default_factory=dict)  # the sidecar's content (also when not written)
     cpu_seconds: float = 0.0  # this process's CPU from initialization to the FMUs' release
 
 
 @dataclass
 class RunOptions:
-    out: Path | None = None
+    out: Path | None = None       # the CSV to write (sidecar, PNG beside it); None: write nothing
     plot: bool = False
     fmu_dir: Path | None = None
     progress: bool | None = None  # None: a bar when stderr is a terminal
@@ -110,7 +112,7 @@ def _recorder(scene: Scene, fmus) -> tuple[Recorder, list]:
     for comp in dict.fromkeys(r.split(".", 1)[0] for r in names):
         vars_ = [r.split(".", 1)[1] for r in names if r.split(".", 1)[0] == comp]
         readers.append((fmus[comp].reader(vars_), [names.index(f"{comp}.{v}") for v in vars_]))
-    return Recorder(names, units), readers
+    return Recorder(names, [normalize_unit(u) for u in units]), readers
 
 
 def _sample(recorder: Recorder, readers, t: float) -> None:
@@ -164,7 +166,7 @@ def run_scene(scene: Scene, options: RunOptions | None = None) -> RunResult:
     and raises RunError (RunInterrupted for Ctrl-C)."""
     options = options or RunOptions()
     check_run_size(scene)
-    out = options.out or Path("results") / f"{scene.name}.csv"
+    out = Path(options.out) if options.out is not None else None
     log = LogCollector(echo=options.verbose_log)
     fmus = load_fmus(scene, options.fmu_dir or default_fmu_dir(scene), log)
     try:
@@ -217,13 +219,17 @@ def _run(scene, options, out, log, fmus, system, master, recorder, readers, inte
         close_fmus(fmus)
     if interrupt.requested and not failure:
         failure, outcome = f"interrupted (Ctrl-C) at t = {master.time or t0:.6g} s", "interrupted"
-    csv, sidecar = partial_paths(out) if failure else (out, out.with_suffix(".json"))
-    write_csv(csv, recorder)
+    if out is None:
+        csv = sidecar = None
+    else:
+        csv, sidecar = partial_paths(out) if failure else (out, out.with_suffix(".json"))
+        write_csv(csv, recorder)
     statistics = master.statistics()
     m = scene.master
-    write_sidecar(sidecar, {
+    metadata = {
         "scene": str(scene.path), "name": scene.name, "status": failure or "completed",
         "outcome": outcome or "completed", "rows": recorder.count,
+        "units": column_units(recorder),
         "start_time": t0, "stop_time": scene.stop_time,
         "master": {"algorithm": m.algorithm, "step": h, "extrapolation": m.extrapolation,
                    "tolerance": m.tolerance, "fmu_tolerance": m.fmu_tolerance,
@@ -234,14 +240,42 @@ def _run(scene, options, out, log, fmus, system, master, recorder, readers, inte
         "versions": versions(), "wall_seconds": wall, "cpu_seconds": cpu,
         "communication_steps": step,
         "statistics": statistics, "master_statistics": master.master_statistics(),
-        "coupling_error": master.coupling_error(), **options.extra_sidecar})
+        "coupling_error": master.coupling_error(), **options.extra_sidecar}
+    if sidecar is not None:
+        write_sidecar(sidecar, metadata)
     if failure:
         raise (RunInterrupted if outcome == "interrupted" else RunError)(failure, csv)
-    png = out.with_suffix(".png") if options.plot else None
+    png = out.with_suffix(".png") if options.plot and out is not None else None
     if png:
-        plot(png, recorder, f"{scene.name}: {scene.master.algorithm}, step {h:g} s")
+        reference = _reference_beside(out, recorder)
+        plot(png, recorder, f"{scene.name}: {scene.master.algorithm}, step {h:g} s",
+             plot_roles(scene), reference)
     return RunResult(out, sidecar, png, recorder, statistics, wall, step,
-                     master.master_statistics(), master.coupling_error(), cpu)
+                     master.master_statistics(), master.coupling_error(), metadata, cpu)
+
+
+def plot_roles(scene: Scene) -> dict | None:
+    """The scene's [analysis] roles (crank angle, speed, torques) for the steady-state plot;
+    None without a complete [analysis] table."""
+    from ..compare import analysis_roles
+    try:
+        return analysis_roles(scene) if "analysis" in scene.raw else None
+    except SceneError:
+        return None
+
+
+def _reference_beside(out: Path, recorder: Recorder):
+    """(names, rows) of `<stem>_reference.csv` beside the run's CSV (crankfmu reference writes
+    it there by default) when it records the same variables; else None."""
+    from .results import read_result_csv
+    path = out.with_name(f"{out.stem}_reference.csv")
+    if not path.is_file():
+        return None
+    try:
+        names, rows = read_result_csv(path)
+    except (OSError, ValueError):
+        return None
+    return (names, rows) if set(recorder.names) <= set(names) and len(rows) > 1 else None
 
 
 def _fixed_steps(master, scene: Scene, progress):

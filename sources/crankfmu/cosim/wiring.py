@@ -7,6 +7,7 @@ variables exist.
 """
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -15,6 +16,8 @@ import numpy as np
 
 from ..scenario.scene import Scene, SceneError
 from .fmu import FmuInstance
+
+log = logging.getLogger(__name__)
 
 
 def default_fmu_dir(scene: Scene) -> Path:
@@ -39,9 +42,37 @@ def resolve_fmu(scene: Scene, comp_name: str, fmu_dir: Path) -> Path:
                                           " or a path ending in .fmu")
     path = fmu_dir / f"{ref}.fmu"
     if not path.is_file() or _build_id(path) != current_build_id():
-        print(f"building {path} (sources changed or FMU missing)")
+        from ..fmi.build import PACKAGE_DIR
+        log.info("building %s (%s) from %s", path, "FMU missing" if not path.is_file() else
+                 "sources changed", PACKAGE_DIR)
+        warn_if_tree_differs(scene.path.resolve().parent.parent)
         build_fmu(ref, fmu_dir)
     return path
+
+
+def tree_differences(other: Path) -> list[str]:
+    """The FMU runtime files (fmi.build.runtime_files) that differ between the imported crankfmu
+    package and another copy of it at `other` (a folder holding crankfmu's modules); [] when it
+    is the same folder or holds no crankfmu."""
+    from ..fmi.build import PACKAGE_DIR, runtime_files
+    other = Path(other).resolve()
+    if not (other / "__init__.py").is_file() or other == PACKAGE_DIR.resolve():
+        return []
+    return [name for name, data in runtime_files()
+            if not (other / name).is_file() or (other / name).read_bytes() != data]
+
+
+def warn_if_tree_differs(tree: Path) -> None:
+    """A non-editable install builds FMUs from its own copy: say so when the source tree beside
+    the scene holds other FMU sources (an edit there would be silently ignored)."""
+    from ..fmi.build import PACKAGE_DIR
+    differ = tree_differences(Path(tree) / "sources" / "crankfmu")
+    if differ:
+        log.warning("the FMUs are built from the installed crankfmu at %s, which differs from "
+                    "the source tree %s (%s%s): edits there are not used; install the tree "
+                    "editable (pip install -e %s)", PACKAGE_DIR, tree / "sources" / "crankfmu",
+                    ", ".join(differ[:3]), f" and {len(differ) - 3} more" if len(differ) > 3
+                    else "", tree)
 
 
 def _build_id(path: Path) -> str | None:

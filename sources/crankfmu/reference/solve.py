@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cosim.results import Recorder, versions, write_csv, write_sidecar
+from ..cosim.results import (Recorder, column_units, normalize_unit, versions, write_csv,
+                             write_sidecar)
 from ..scenario.scene import Scene, SceneError
 from .composed import ComposedModel
 
@@ -92,7 +93,7 @@ def solve_reference(scene: Scene, rtol: float = DEFAULT_RTOL, times=None,
     model = ComposedModel(scene)
     rec_map = RecordMap(model)
     times = record_times(scene) if times is None else np.asarray(times, dtype=float)
-    recorder = Recorder(list(scene.record), rec_map.units)
+    recorder = Recorder(list(scene.record), [normalize_unit(u) for u in rec_map.units])
     atol = rtol * model.state_nominal()
     x = model.initial_state(t0=scene.start_time)
     model.solver = "scipy"  # the reference is scipy's solve_ivp, independent of the FMU runtime
@@ -119,7 +120,7 @@ def write_reference(scene: Scene, out: Path, result: ReferenceResult) -> Referen
     write_sidecar(sidecar, {
         "scene": str(scene.path), "name": scene.name, "status": "completed",
         "kind": "monolithic reference", "start_time": scene.start_time,
-        "stop_time": scene.stop_time,
+        "stop_time": scene.stop_time, "units": column_units(result.recorder),
         "reference": {"rtol": result.rtol, "atol": "rtol * state_nominal()",
                       "method": result.method, "rhs_calls": result.rhs_calls,
                       "record_points": result.recorder.count},

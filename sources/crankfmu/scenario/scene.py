@@ -372,28 +372,104 @@ def load_scene(path) -> Scene:
 
 
 def apply_overrides(scene: Scene, assignments: list[str]) -> None:
-    """--set comp.param=value (finite numbers, true/false) on the loaded scene; whether the
-    parameter exists and takes that type is checked against the FMU (crankfmu.cosim.wiring)."""
+    """--set REF=VALUE on the loaded scene, REF one of
+
+        comp.param=value    a parameter (finite number, true/false)
+        comp.input=value    an input that is not connected: held constant at value
+        master.key=value    a [master] key (step, algorithm, extrapolation, tolerance, ...)
+
+    Values are checked as the same key in a scene file would be; whether a parameter exists
+    and takes that type is checked against the FMU (crankfmu.cosim.wiring)."""
     for text in assignments:
         key = f"--set {_show(text)[1:-1]}"
-        if "=" not in text or "." not in text.split("=", 1)[0]:
-            raise SceneError(scene.path, key, "must look like comp.param=value")
+        if not isinstance(text, str) or "=" not in text or "." not in text.split("=", 1)[0]:
+            raise SceneError(scene.path, key, "must look like comp.param=value, "
+                                              "comp.input=value or master.key=value")
         ref, value = text.split("=", 1)
-        comp, param = ref.split(".", 1)
-        if comp not in scene.components:
-            raise SceneError(scene.path, key, f"unknown component {_show(comp)}; "
-                                              f"components: {', '.join(scene.components)}")
-        if not param:
-            raise SceneError(scene.path, key, "no parameter name after the component")
-        lowered = value.strip().lower()
-        if lowered in ("true", "false"):
-            parsed: float | bool = lowered == "true"
+        set_value(scene, ref.strip(), _parse_value(scene, key, value), key)
+
+
+def _parse_value(scene: Scene, key: str, value: str):
+    lowered = value.strip().lower()
+    if lowered in ("true", "false"):
+        return lowered == "true"
+    try:
+        parsed = float(value)
+    except ValueError:
+        return value.strip()  # a word: only a master key (algorithm) takes one
+    if not math.isfinite(parsed):
+        raise SceneError(scene.path, key, f"value {_show(value)} is not a finite number")
+    return parsed
+
+
+def set_value(scene: Scene, ref: str, value, key: str | None = None) -> None:
+    """Set "comp.param", "comp.input" (constant) or "master.key" to `value` (the Python API's
+    parameters= and the command line's --set)."""
+    key = key or f"{ref!r}"
+    comp, name = ref.split(".", 1) if "." in ref else (ref, "")
+    if comp == "master" and comp not in scene.components:
+        _set_master(scene, name, value, key)
+        return
+    if comp not in scene.components:
+        raise SceneError(scene.path, key, f"unknown component {_show(comp)}; components: "
+                                          f"{', '.join(scene.components)} (or master.KEY)")
+    if not name:
+        raise SceneError(scene.path, key, "no parameter name after the component")
+    if isinstance(value, str):
+        raise SceneError(scene.path, key, f"value {_show(value)} is not a number or true/false")
+    if ref in scene.inputs or variable_causality(scene, comp, name) == "input":
+        set_input(scene, ref, value, key)
+        return
+    scene.components[comp].parameters[name] = value
+
+
+def set_input(scene: Scene, ref: str, value, key: str | None = None) -> None:
+    """Drive the unconnected input `ref` with a constant, a table [[t, v], ...] or an
+    InputSignal (the Python API's inputs=; --set comp.input=value)."""
+    key = key or f"[inputs].\"{ref}\""
+    _variable_ref(scene.path, key, ref, scene.components)
+    if any(c.target == ref for c in scene.connections):
+        raise SceneError(scene.path, key, f"{ref} is connected; only an unconnected input can "
+                                          "be set")
+    if isinstance(value, InputSignal):
+        signal = InputSignal(ref, list(value.times), list(value.values), value.interpolation)
+    elif isinstance(value, bool):
+        raise SceneError(scene.path, key, f"an input takes a number, got {value!r}")
+    elif isinstance(value, (int, float)):
+        signal = _parse_input(scene.path, ref, float(value))
+    else:
+        signal = _parse_input(scene.path, ref, {"table": [list(map(float, r)) for r in value]})
+    scene.inputs[ref] = signal
+
+
+def variable_causality(scene: Scene, comp: str, name: str) -> str | None:
+    """The causality of comp.name from the FMU's variable table (catalog FMUs: from the physics
+    model, without building; an FMU file: its modelDescription); None when unknown."""
+    fmu = scene.components[comp].fmu
+    try:
+        if fmu.endswith(".fmu"):
+            from fmpy import read_model_description
+            path = (Path(scene.path).parent / fmu).resolve()
+            md = read_model_description(str(path))
+            found = [v.causality for v in md.modelVariables if v.name == name]
         else:
-            try:
-                parsed = float(value)
-            except ValueError:
-                raise SceneError(scene.path, key, f"value {_show(value)} is not a number or "
-                                                  "true/false") from None
-            if not math.isfinite(parsed):
-                raise SceneError(scene.path, key, f"value {_show(value)} is not a finite number")
-        scene.components[comp].parameters[param] = parsed
+            from ..physics.catalog import FMU_MODELS, physics_class
+            if fmu not in FMU_MODELS:
+                return None
+            from ..slaves.base import variable_table
+            found = [v.causality for v in variable_table(physics_class(fmu)) if v.name == name]
+    except Exception:  # noqa: BLE001 - unreadable FMU: the wiring check reports it later
+        return None
+    return found[0] if found else None
+
+
+def _set_master(scene: Scene, name: str, value, key: str) -> None:
+    settable = sorted(set(Master.__dataclass_fields__) - {"order"})
+    if name not in settable:
+        raise SceneError(scene.path, key, f"unknown master key {_show(name)}; keys: "
+                                          f"{', '.join(settable)}")
+    if isinstance(value, float) and value.is_integer() and \
+            name in ("extrapolation", "max_iterations", "max_steps"):
+        value = int(value)
+    checked = _parse_master(scene.path, {name: value})  # same checks as a [master] table
+    setattr(scene.master, name, getattr(checked, name))

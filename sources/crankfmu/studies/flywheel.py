@@ -72,19 +72,18 @@ def report(table_csv: Path, scene, plot: Path | None = None) -> str:
 
 
 def _plot(path: Path, J, delta, a: dict, fine, af: dict, name: str) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from ..cosim.results import PALETTE, new_figure
 
-    fig, ax = plt.subplots(figsize=(8, 4.6))
-    ax.plot(J, 100 * delta, "o", color="C0", label="co-simulation (crankfmu sweep)")
-    ax.plot(fine, 100 * af["delta_1"], "-", color="C0", lw=1.0, alpha=0.6,
+    fig = new_figure(figsize=(8, 4.6))
+    ax = fig.subplots()
+    ax.plot(J, 100 * delta, "o", color=PALETTE[0], label="co-simulation (crankfmu sweep)")
+    ax.plot(fine, 100 * af["delta_1"], "-", color=PALETTE[0], lw=1.0, alpha=0.6,
             label="first approximation" + (" with armature lag" if a["lag"] else ""))
-    ax.axvline(a["J_Mx"], color="C3", ls="--", lw=1.0)
-    ax.annotate(f"(28): J_Mx = {a['J_Mx']:.3f} kg m$^2$", (a["J_Mx"], 0.97),
+    ax.axvline(a["J_Mx"], color=PALETTE[3], ls="--", lw=1.0)
+    ax.annotate(f"(28): J_Mx = {a['J_Mx']:.3f} kg.m2", (a["J_Mx"], 0.97),
                 xycoords=("data", "axes fraction"), xytext=(6, 0), textcoords="offset points",
-                color="C3", fontsize=9, va="top")
-    ax.set_xlabel("flywheel on the motor shaft, motor.J_flywheel [kg m$^2$]")
+                color=PALETTE[3], fontsize=9, va="top")
+    ax.set_xlabel("flywheel on the motor shaft, motor.J_flywheel [kg.m2]")
     ax.set_ylabel("non-uniformity delta [%]")
     ax.set_ylim(bottom=0.0)
     ax.grid(alpha=0.3)
@@ -99,4 +98,3 @@ def _plot(path: Path, J, delta, a: dict, fine, af: dict, name: str) -> None:
                  fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)

@@ -344,14 +344,12 @@ def _resume(out: Path, key: dict, columns: list[str], parameters: list[str]) -> 
 def plot_sweep(path: Path, table: SweepTable, title: str) -> Path:
     """Each figure (rows of panels) against each varied parameter (columns); failed runs are
     marked with a red x on the lower edge of their panels."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from ..compare import UNITS
+    from ..cosim.results import PALETTE, axis_label, new_figure
 
     figs, params = table.figures, table.parameters
-    fig, axes = plt.subplots(len(figs), len(params), figsize=(3.6 * len(params) + 1,
-                                                              2.0 * len(figs) + 0.8),
-                             squeeze=False, sharex="col")
+    fig = new_figure(figsize=(3.6 * len(params) + 1, 2.0 * len(figs) + 0.8))
+    axes = fig.subplots(len(figs), len(params), squeeze=False, sharex="col")
     ok = np.array([r["status"] == "completed" for r in table.rows], dtype=bool)
     for j, p in enumerate(params):
         x = table.column(p)
@@ -360,18 +358,18 @@ def plot_sweep(path: Path, table: SweepTable, title: str) -> Path:
             y = table.column(name)
             order = np.argsort(x[ok], kind="stable")
             ax.plot(x[ok][order], y[ok][order], "o-" if len(params) == 1 else "o",
-                    ms=3.5, lw=0.8)
+                    ms=3.5, lw=0.8, color=PALETTE[0])
             if (~ok).any():
                 good = y[ok][np.isfinite(y[ok])]
                 ax.plot(x[~ok], np.full((~ok).sum(), good.min() if good.size else 0.0),
-                        "rx", ms=6, label="failed")
+                        "x", color=PALETTE[3], ms=6, label="failed")
             if j == 0:
-                ax.set_ylabel(name, fontsize=8)
+                ax.set_ylabel(axis_label(name, UNITS[name]) if name in UNITS else name,
+                              fontsize=8)
             ax.grid(alpha=0.3)
             ax.tick_params(labelsize=7)
         axes[-1, j].set_xlabel(p)
     fig.suptitle(f"{title}: {len(table.rows)} runs, {int(ok.sum())} completed", fontsize=10)
     fig.tight_layout(rect=(0, 0, 1, 0.98))
     fig.savefig(path, dpi=100)
-    plt.close(fig)
     return path

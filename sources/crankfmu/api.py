@@ -1,0 +1,216 @@
+"""crankfmu's Python API, in the manner of fmpy's `simulate_fmu`:
+
+    import crankfmu
+    result = crankfmu.simulate("scenarios/servo_press.toml", stop_time=0.4,
+                               parameters={"press.F_max": 65e3})
+    result.values["press.w_crank"]      # numpy structured array: "time", then "comp.var"
+    result.units["press.w_crank"]       # "rad/s" (FMI's spelling, as in the modelDescription)
+    fig = result.plot()                 # a matplotlib Figure; the backend is left alone
+    df = result.to_pandas()             # with pandas installed
+
+Nothing is written unless `out` is given (a CSV path for simulate and reference, a folder for
+accuracy, compare and sweep). `scene` is a path to a scene file (.toml, .ssp) or a loaded
+scene (`load_scene`); a loaded scene is copied, never changed. `parameters` and `inputs` map
+"comp.name" to values: a parameter, a constant or a table [[t, v], ...] for an unconnected
+input; "master.step" and the other [master] keys go in `parameters` too (as with --set).
+"""
+from __future__ import annotations
+
+import copy
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["Result", "accuracy", "compare", "load_scene", "reference", "simulate"]
+
+
+@dataclass
+class Result:
+    """A run's (or a reference's) recorded values with units and what the sidecar holds."""
+
+    values: np.ndarray                 # structured: "time", then one field per "comp.var"
+    units: dict[str, str]              # field -> unit in FMI's spelling ("1": dimensionless)
+    statistics: dict = field(default_factory=dict)      # per component: doStep calls, ...
+    coupling_error: dict = field(default_factory=dict)  # the energy-mismatch error estimate
+    metadata: dict = field(default_factory=dict)        # the JSON sidecar's content
+    files: dict = field(default_factory=dict)           # what was written: csv, sidecar, png
+    title: str = ""
+    analysis: dict = field(default_factory=dict)        # the scene's [analysis] roles, if any
+
+    @property
+    def names(self) -> list[str]:
+        """The recorded variables ("comp.var"), without "time"."""
+        return list(self.values.dtype.names[1:])
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        return self.values[name]
+
+    def plot(self, variables=None, *, steady: bool = False, reference: "Result | None" = None,
+             cycles: int = 3):
+        """A matplotlib Figure: one panel per recorded variable (or `variables`), each axis
+        with its unit, a turning crank angle modulo 2 pi. `steady=True`: the periodic steady
+        state instead, crank speed and drive torque over the last `cycles` revolutions (needs
+        the scene's [analysis] roles recorded), with `reference` (crankfmu.reference's Result)
+        drawn over it. Not registered with pyplot, so the backend stays as it is; in Jupyter
+        the returned Figure shows inline."""
+        from .cosim.results import figure, steady_figure
+        if steady:
+            if not self.analysis or not all(self.analysis.get(r) in self.names for r in
+                                            ("crank_angle", "crank_speed", "drive_torque")):
+                raise ValueError("plot(steady=True) needs the scene's [analysis] crank_angle, "
+                                 "crank_speed and drive_torque among the recorded variables")
+            rows = self.values.view(np.float64).reshape(len(self.values), -1)
+            ref = None
+            if reference is not None:
+                ref = (reference.names,
+                       reference.values.view(np.float64).reshape(len(reference.values), -1))
+            return steady_figure(self.names, [self.units[n] for n in self.names], rows,
+                                 self.analysis, self.title, ref, cycles)
+        names = list(variables) if variables is not None else self.names
+        rows = np.column_stack([self.values["time"]] + [self.values[n] for n in names])
+        return figure(names, [self.units[n] for n in names], rows, self.title)
+
+    def to_pandas(self):
+        """A pandas DataFrame indexed by time (needs pandas); units in `df.attrs["units"]`."""
+        try:
+            import pandas as pd
+        except ImportError:
+            raise ImportError("Result.to_pandas needs pandas: pip install pandas") from None
+        df = pd.DataFrame({n: self.values[n] for n in self.names},
+                          index=pd.Index(self.values["time"], name="time"))
+        df.attrs["units"] = dict(self.units)
+        return df
+
+
+def structured(names, rows: np.ndarray) -> np.ndarray:
+    """fmpy's layout: a structured array with the field "time", then one per name."""
+    dtype = np.dtype([("time", np.float64)] + [(n, np.float64) for n in names])
+    out = np.empty(len(rows), dtype=dtype)
+    for k, name in enumerate(dtype.names):
+        out[name] = rows[:, k]
+    return out
+
+
+def _result(recorder, metadata: dict, files: dict, title: str, statistics=None,
+            coupling_error=None, scene=None) -> Result:
+    from .cosim.results import column_units
+    from .cosim.runner import plot_roles
+    return Result(structured(recorder.names, recorder.rows), column_units(recorder),
+                  statistics if statistics is not None else metadata.get("statistics", {}),
+                  coupling_error if coupling_error is not None
+                  else metadata.get("coupling_error", {}),
+                  metadata, {k: v for k, v in files.items() if v is not None}, title,
+                  (plot_roles(scene) or {}) if scene is not None else {})
+
+
+def load_scene(scene):
+    """A scene file (.toml or .ssp) loaded and checked (crankfmu.scenario.load_scene)."""
+    from .scenario.scene import load_scene as _load
+    return _load(scene)
+
+
+def prepare(scene, *, stop_time=None, step=None, algorithm=None, extrapolation=None,
+            parameters=None, inputs=None):
+    """A copy of `scene` (or the scene loaded from that path) with the settings applied and
+    checked as a scene file's would be."""
+    from .errors import MAX_TIME
+    from .scenario.scene import (Scene, SceneError, _number, check_run_size, set_input,
+                                 set_value)
+    scene = copy.deepcopy(scene) if isinstance(scene, Scene) else load_scene(scene)
+    for ref, value in (parameters or {}).items():
+        set_value(scene, ref, value, f"parameters[{ref!r}]")
+    for ref, value in (inputs or {}).items():
+        set_input(scene, ref, value, f"inputs[{ref!r}]")
+    if stop_time is not None:
+        scene.stop_time = _number(scene.path, "stop_time", stop_time, minimum=-MAX_TIME,
+                                  maximum=MAX_TIME)
+        if scene.stop_time <= scene.start_time:
+            raise SceneError(scene.path, "stop_time", f"must exceed start_time = "
+                                                      f"{scene.start_time}")
+    for name, value in (("step", step), ("algorithm", algorithm),
+                        ("extrapolation", extrapolation)):
+        if value is not None:
+            set_value(scene, f"master.{name}", value, name)
+    check_run_size(scene)
+    return scene
+
+
+def simulate(scene, *, stop_time=None, step=None, algorithm=None, extrapolation=None,
+             parameters=None, inputs=None, out=None, progress=False, plot=False,
+             fmu_dir=None, log=False) -> Result:
+    """Co-simulate the scene with its master (crankfmu.cosim.runner.run_scene) and return the
+    recorded values. `out`: a CSV path to write (the JSON sidecar beside it, and with
+    `plot=True` a PNG); nothing is written without it. `fmu_dir`: the built FMUs (default:
+    fmus/ beside the scene's scenarios/ folder, else the package's build folder; stale or
+    missing FMUs are built there, never into the working folder)."""
+    from .cosim.runner import RunOptions, run_scene
+    scene = prepare(scene, stop_time=stop_time, step=step, algorithm=algorithm,
+                    extrapolation=extrapolation, parameters=parameters, inputs=inputs)
+    result = run_scene(scene, RunOptions(out=Path(out) if out is not None else None,
+                                         plot=plot, fmu_dir=fmu_dir, progress=progress,
+                                         verbose_log=log))
+    m = scene.master
+    return _result(result.recorder, result.metadata,
+                   {"csv": result.csv, "sidecar": result.sidecar, "png": result.png},
+                   f"{scene.name}: {m.algorithm}, step {m.step:g} s", result.statistics,
+                   result.coupling_error, scene)
+
+
+def reference(scene, *, stop_time=None, parameters=None, inputs=None, rtol=None, method=None,
+              out=None, progress=False) -> Result:
+    """The scene's monolithic reference (its physics models as one ODE, scipy), recorded on
+    the run's grid. `out`: a CSV path to write (sidecar beside it); nothing without it."""
+    from .reference import DEFAULT_RTOL, solve_reference, write_reference
+    scene = prepare(scene, stop_time=stop_time, parameters=parameters, inputs=inputs)
+    result = solve_reference(scene, rtol=DEFAULT_RTOL if rtol is None else rtol,
+                             method=method, progress=progress)
+    metadata = {"kind": "monolithic reference", "method": result.method, "rtol": result.rtol,
+                "rhs_calls": result.rhs_calls, "wall_seconds": result.wall_seconds}
+    if out is not None:
+        write_reference(scene, Path(out), result)
+    return _result(result.recorder, metadata, {"csv": result.csv, "sidecar": result.sidecar},
+                   f"{scene.name}: monolithic reference, {result.method} rtol {result.rtol:g}",
+                   {}, {}, scene)
+
+
+def accuracy(scene, *, out=None, stop_time=None, parameters=None, inputs=None, **options):
+    """Error against the monolithic reference and wall time per master setting
+    (crankfmu.accuracy.run_accuracy; `options` are AccuracyOptions' fields: algorithms,
+    extrapolations, steps, tolerances, fmu_tolerances, metric, variables, cycles, target,
+    reference_rtol, fmu_dir, progress, jobs, scheduler, executor). `out`: the folder to write
+    (accuracy.csv, work_precision.png, the runs); without it they go to a temporary folder
+    that is removed, and the result's paths are None."""
+    from .accuracy import AccuracyOptions, run_accuracy
+    scene = prepare(scene, stop_time=stop_time, parameters=parameters, inputs=inputs)
+    options.setdefault("progress", False)
+    if out is not None:
+        return run_accuracy(scene, AccuracyOptions(out_dir=Path(out), **options))
+    with tempfile.TemporaryDirectory(prefix="crankfmu-accuracy-") as tmp:
+        result = run_accuracy(scene, AccuracyOptions(out_dir=Path(tmp), **options))
+    result.reference_csv = result.csv = result.png = None
+    return result
+
+
+def compare(scene_a, scene_b, *, stop_time=None, out=None, fmu_dir=None, jobs=1,
+            scheduler=None, progress=False) -> dict:
+    """Run two scenes (e.g. a component swap) and compare cycle time, speeds, delta, peak
+    torques and energy per stroke (crankfmu.compare). Returns a dict: "rows" (metric, unit, A,
+    B, B - A, relative), "text" (the table), "a" and "b" (the role series); with `out`, the
+    folder written (compare.csv, compare.png, both runs' CSVs) and "csv", "png" in it."""
+    import contextlib
+
+    from .compare import compare_scenes
+    from .cosim.runner import RunOptions
+    from .studies.executor import make_executor
+    scenes = [prepare(s, stop_time=stop_time) for s in (scene_a, scene_b)]
+    options = RunOptions(fmu_dir=fmu_dir, progress=progress)
+    serial = jobs == 1 and scheduler is None  # one after the other in this process
+    with contextlib.nullcontext() if serial else make_executor(jobs, scheduler) as executor:
+        if out is not None:
+            return compare_scenes(scenes[0], scenes[1], Path(out), options, executor)
+        with tempfile.TemporaryDirectory(prefix="crankfmu-compare-") as tmp:
+            result = compare_scenes(scenes[0], scenes[1], Path(tmp), options, executor)
+    result["csv"] = result["png"] = None
+    return result

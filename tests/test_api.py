@@ -1,0 +1,165 @@
+"""The Python API (crankfmu/api.py): fmpy-like structured results with units, nothing written
+unless asked, plots that leave the matplotlib backend alone, --set-like settings."""
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import pytest
+
+from conftest import SCENARIOS
+
+SERVO = SCENARIOS / "servo_press.toml"
+
+
+def test_import_is_cheap():
+    import subprocess
+    code = ("import sys, crankfmu; heavy = [m for m in ('numpy', 'fmpy', 'matplotlib', "
+            "'crankfmu.api', 'scipy') if m in sys.modules]; print(heavy)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
+def test_simulate_from_an_empty_folder(tmp_path, monkeypatch):
+    """The issue's must-be-true item, as it reads: an empty working folder, the scene by path,
+    a parameter override; fields, units, no file written, the backend unchanged."""
+    import matplotlib
+
+    import crankfmu
+    monkeypatch.chdir(tmp_path)
+    backend = matplotlib.get_backend()
+    result = crankfmu.simulate(SERVO, stop_time=0.4, parameters={"press.F_max": 65e3})
+    assert result.values.dtype.names[0] == "time"
+    assert "press.w_crank" in result.values.dtype.names
+    assert result.units["press.w_crank"] == "rad/s"
+    assert result.units["time"] == "s" and result.units["motor.flange_tau"] == "N.m"
+    assert result.values["time"][-1] == pytest.approx(0.4)
+    assert result.metadata["components"]["press"]["parameters"]["F_max"] == 65e3
+    assert result.coupling_error["ports"] and set(result.statistics) == {"motor", "press"}
+    fig = result.plot()
+    assert matplotlib.get_backend() == backend
+    assert type(fig).__name__ == "Figure"
+    labels = [ax.get_ylabel() for ax in fig.axes]
+    assert "press.w_crank\n[rad/s]" in labels
+    assert list(tmp_path.iterdir()) == []  # nothing written into the working folder
+    df = pytest.importorskip("pandas") and result.to_pandas()
+    assert df.index.name == "time" and df.attrs["units"]["press.w_crank"] == "rad/s"
+    assert np.array_equal(df["press.w_crank"].to_numpy(), result.values["press.w_crank"])
+
+
+def test_simulate_writes_with_out_and_fmpy_reads_it(tmp_path, fmu_dir):
+    import json
+
+    from fmpy.util import read_csv
+
+    import crankfmu
+    scene = crankfmu.load_scene(SERVO)
+    result = crankfmu.simulate(scene, stop_time=0.05, step=2e-3, out=tmp_path / "r.csv",
+                               fmu_dir=fmu_dir, inputs={"motor.u": [[0, 0], [0.05, 220]]},
+                               parameters={"master.extrapolation": 1})
+    assert scene.stop_time == 3.0 and "motor.u" in scene.inputs  # the caller's scene unchanged
+    assert scene.inputs["motor.u"].values == [220.0]
+    back = read_csv(tmp_path / "r.csv")
+    assert back.dtype.names == result.values.dtype.names
+    assert np.array_equal(back["press.w_crank"], result.values["press.w_crank"])
+    side = json.loads((tmp_path / "r.json").read_text())
+    assert side["units"] == result.units and side["master"]["extrapolation"] == 1
+    assert side["master"]["step"] == 2e-3
+
+
+def test_set_reaches_parameters_inputs_and_master(servo_scene):
+    from crankfmu.scenario.scene import SceneError, apply_overrides
+    apply_overrides(servo_scene, ["press.F_max=6e4", "motor.u=200", "master.step=2e-3",
+                                  "master.algorithm=jacobi", "master.extrapolation=2"])
+    assert servo_scene.components["press"].parameters["F_max"] == 6e4
+    assert "u" not in servo_scene.components["motor"].parameters
+    assert servo_scene.inputs["motor.u"].values == [200.0]
+    m = servo_scene.master
+    assert (m.step, m.algorithm, m.extrapolation) == (2e-3, "jacobi", 2)
+    for bad, words in (("master.step=-1", "must be > 0"), ("master.stepp=1", "unknown master key"),
+                       ("press.flange_tau=1", "is connected"),
+                       ("master.algorithm=fast", "not one of")):
+        with pytest.raises(SceneError, match=words):
+            apply_overrides(servo_scene, [bad])
+
+
+def test_reference_returns_a_result_and_writes_nothing(tmp_path, monkeypatch):
+    import crankfmu
+    monkeypatch.chdir(tmp_path)
+    ref = crankfmu.reference(SERVO, stop_time=0.05, rtol=1e-8)
+    assert ref.units["press.w_crank"] == "rad/s" and ref.values["time"][-1] == pytest.approx(0.05)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_steady_state_plot_with_the_reference(tmp_path, fmu_dir):
+    """The servo press at steady state: speed and torque over the last revolutions, the
+    reference drawn over it; coinciding curves get one legend entry saying so."""
+    import matplotlib
+
+    import crankfmu
+    backend = matplotlib.get_backend()
+    run = crankfmu.simulate(SERVO, stop_time=1.3, fmu_dir=fmu_dir)
+    ref = crankfmu.reference(SERVO, stop_time=1.3, rtol=1e-8)
+    fig = run.plot(steady=True, reference=ref)
+    assert matplotlib.get_backend() == backend
+    assert [ax.get_ylabel() for ax in fig.axes] == ["crank speed\npress.w_crank [rad/s]",
+                                                   "drive torque\nmotor.flange_tau [N.m]"]
+    assert "steady state: the last 2 revolutions" in fig.texts[0].get_text()
+    speed_legend = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert speed_legend == ["co-simulation = monolithic reference (curves coincide)"]
+    t0 = fig.axes[0].get_lines()[0].get_xdata()[0]
+    assert 0.5 <= t0 < 0.6  # the run-up from rest ([analysis].from_time = 0.5) is left out
+    phi = run.plot().axes[0]  # the whole run: the crank angle within the revolution
+    assert phi.get_ylabel() == "press.phi mod 2 pi\n[rad]"
+    assert max(phi.get_lines()[0].get_ydata()) < 2 * np.pi
+
+
+def test_coinciding_curves_share_one_legend_entry():
+    from crankfmu.cosim.results import mark_coinciding, new_figure
+    ax = new_figure().subplots()
+    t = np.linspace(0, 1, 50)
+    ax.plot(t, np.sin(t), label="a")
+    ax.plot(t[::7], np.sin(t[::7]) + 1e-6, label="b")
+    ax.plot(t, np.cos(t), label="c")
+    assert mark_coinciding(ax) == [("a", "b")]
+    assert ax.get_legend_handles_labels()[1] == ["a = b (curves coincide)", "c"]
+    assert [ln.get_visible() for ln in ax.get_lines()] == [True, False, True]
+
+
+def test_run_plot_draws_the_steady_state_with_the_reference_beside(tmp_path, fmu_dir):
+    from crankfmu.cli import main
+    scene = str(SERVO)
+    assert main(["-q", "reference", scene, "--stop-time", "0.8", "--out",
+                 str(tmp_path / "servo_press_reference.csv"), "--rtol", "1e-8"]) == 0
+    assert main(["-q", "run", scene, "--stop-time", "0.8", "--fmus", str(fmu_dir), "--out",
+                 str(tmp_path / "servo_press.csv"), "--plot"]) == 0
+    assert (tmp_path / "servo_press.png").stat().st_size > 10_000
+    from crankfmu.cosim.runner import _reference_beside
+    from crankfmu.cosim.results import Recorder
+    found = _reference_beside(tmp_path / "servo_press.csv", Recorder(["press.w_crank"], ["rad/s"]))
+    assert found is not None and "press.w_crank" in found[0]
+
+
+def test_compare_accuracy_and_sweep_write_only_into_out(tmp_path, monkeypatch, fmu_dir):
+    import copy
+
+    import crankfmu
+    monkeypatch.chdir(tmp_path)
+    a = crankfmu.load_scene(SERVO)
+    b = copy.deepcopy(a)
+    b.name = "with_flywheel"
+    b.components["motor"].parameters["J_flywheel"] = 0.1
+    cmp = crankfmu.compare(a, b, stop_time=0.7, fmu_dir=fmu_dir)
+    assert "N.m" in cmp["text"] and cmp["csv"] is None
+    acc = crankfmu.accuracy(SERVO, stop_time=0.05, algorithms=["gauss-seidel"],
+                            extrapolations=[0], steps=[2e-3], fmu_dir=fmu_dir,
+                            reference_rtol=1e-8)
+    assert acc.outcomes[0].ok and acc.csv is None
+    table = crankfmu.sweep(SERVO, ["motor.J_flywheel=0,0.1"], stop_time=0.7, jobs=1,
+                           fmu_dir=fmu_dir, progress=False)
+    assert len(table) == 2 and table.csv is None and table.rows[1]["status"] == "completed"
+    assert list(tmp_path.iterdir()) == []
+    crankfmu.accuracy(SERVO, out=tmp_path / "acc", stop_time=0.05, algorithms=["jacobi"],
+                      extrapolations=[0], steps=[2e-3], fmu_dir=fmu_dir, reference_rtol=1e-8)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["acc"]
+    assert (tmp_path / "acc" / "accuracy.csv").is_file()
