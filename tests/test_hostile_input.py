@@ -537,3 +537,38 @@ def test_100_runs_in_one_process_grow_memory_by_less_than_10_mb(tmp_path, rotors
     grown = _rss_bytes() - before
     print(f"RSS growth over 100 runs: {grown / 2**20:.2f} MiB")
     assert grown < 10 * 2**20
+
+
+HAMMER_ALONE = """
+[scene]
+name = "hammer_alone"
+stop_time = 0.05
+[master]
+algorithm = "gauss-seidel"
+step = 1e-3
+[components.hammer]
+fmu = "CrankRockerHammer"
+[record]
+variables = ["hammer.w_crank"]
+"""
+
+
+@pytest.mark.parametrize("assignment, words", [
+    ("hammer.c_rod=1e300", "below round-off|more than"),   # absurdly stiff rod damping
+    ("hammer.J_crank=0", "not finite"),                      # no inertia on the crank shaft
+])
+def test_a_step_that_cannot_finish_fails_in_bounded_time(tmp_path, fmu_dir, assignment, words):
+    """Before: `--set hammer.c_rod=1e300` did not simulate 0.05 s in 240 s, and J_crank = 0
+    with nothing on the shaft hung plain fmpy. Now the FMU's step ends with a reason: one work
+    limit per step over all its event restarts, and non-finite derivatives stop it at once.
+    (J_crank = 0 alone: the hammer without its motor, so nothing else brings inertia.)"""
+    if "J_crank" in assignment:  # the hammer alone: its motor's inertia would hold the crank
+        scene = load_scene(write(tmp_path, HAMMER_ALONE))
+    else:
+        scene = load_scene(SCENARIOS / "hammer.toml")
+        scene.stop_time = 0.05
+    apply_overrides(scene, [assignment])
+    start = time.perf_counter()
+    with pytest.raises(RunError, match=words):
+        run_scene(scene, RunOptions(out=tmp_path / "out.csv", fmu_dir=fmu_dir, progress=False))
+    assert time.perf_counter() - start < 60.0

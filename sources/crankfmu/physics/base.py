@@ -1,4 +1,5 @@
-"""The contract every physics model implements (no FMI here: numpy and scipy only).
+"""The contract every physics model implements (no FMI here: plain Python, numpy; scipy only on
+the scipy path).
 
 A model is a set of ODEs with inputs, outputs, parameters and switchable effects. The same model
 object serves the FMU (through `crankfmu.slaves.base.ModelSlave`) and the monolithic reference
@@ -20,7 +21,9 @@ Methods
     state_names()                  names of the continuous states *for the enabled effects*:
                                    an effect that is off adds no state (it costs nothing).
     initial_state(u)               state vector at the start time, given the input vector u.
-    derivatives(t, x, u)           dx/dt (u: input vector in `inputs` order).
+    derivatives(t, x, u)           dx/dt (u: input vector in `inputs` order). Called ~7 times
+                                   per step by the runtime's integrator: work on floats (math,
+                                   not numpy, for scalars) and return a list or tuple.
     output_values(t, x, u)         output vector in `outputs` order.
 
 Optional (hybrid models)
@@ -33,10 +36,19 @@ Optional (hybrid models)
     discrete_state() / set_discrete_state(d)   JSON-serialisable modes, saved with FMU state
                                    (with solver_state(): the integrator's step size).
     state_nominal()                typical magnitude per state (absolute tolerance = rtol * it).
-    advance(...)                   override to integrate in closed form.
+    advance(...)                   override to integrate in closed form (set
+                                   advance_integrates_derivatives = True when it solves
+                                   derivatives() exactly, so the monolithic reference may
+                                   compose the model).
 
 Inputs reach `advance` as a callable u_of_t(t) -> input vector, so a master may hand over an
-input polynomial (extrapolation) instead of a held value.
+input polynomial (extrapolation) instead of a held value; from the FMU it is an
+`InputPolynomial`, whose `taylor(t)` gives the coefficients a closed form needs.
+
+What the base class does with that: `step` (what the FMU calls) runs `advance` under one work
+limit; `advance` integrates between events with `integrate`, which uses the runtime's
+Dormand-Prince 5(4) (`physics/dopri.py`, solver = "dopri5") or scipy's solve_ivp with the method
+in `integrator` (solver = "scipy": the cross-check; the FMU parameter `scipy_solver`).
 """
 from __future__ import annotations
 
