@@ -28,6 +28,7 @@ from crankfmu.scenario import SceneError, load_scene
 from crankfmu.scenario.scene import apply_overrides
 
 from conftest import ROOT, SCENARIOS
+from fuzz.scenes import LOOP
 
 SERVO = (SCENARIOS / "servo_press.toml").read_text()
 
@@ -261,30 +262,6 @@ def test_a_boolean_for_a_real_parameter_is_refused(servo_scene, fmu_dir, tmp_pat
     apply_overrides(scene, ["press.effect_gravity=1"])
     with pytest.raises(SceneError, match="is a Boolean parameter: true or false, got 1.0"):
         run_scene(scene, RunOptions(out=tmp_path / "x.csv", fmu_dir=fmu_dir, progress=False))
-
-
-LOOP = """
-[scene]
-name = "loop"
-stop_time = 0.02
-[master]
-algorithm = "{algorithm}"
-step = 1e-3
-[components.a]
-fmu = "StephensonPress"
-effects = ["driven_crank"]
-[components.b]
-fmu = "StephensonPress"
-effects = ["driven_crank"]
-[[connections]]
-from = "a.flange_w"
-to = "b.shaft_w"
-[[connections]]
-from = "b.flange_w"
-to = "a.shaft_w"
-[record]
-variables = ["a.flange_w", "b.flange_w"]
-"""
 
 
 @pytest.mark.parametrize("algorithm", ["jacobi", "gauss-seidel", "adaptive"])
