@@ -180,7 +180,7 @@ class CrankRockerHammer(RockerImpact):
         return self.p.J_crank + self.p.gear_ratio ** 2 * u[1]
 
     def _support_force(self, u0, v0):
-        return self._d["c0"] * u0 + self.p.support_damping * v0
+        return self._spring(u0) + self.p.support_damping * v0
 
     def _accelerations(self, x, u, P):
         _, M_rocker, F_axis, _, _, _ = self.rod(x)
@@ -207,7 +207,8 @@ class CrankRockerHammer(RockerImpact):
         return rocker + 0.5 * self._crank_inertia(u) * w * w + 0.5 * self.p.k_rod * stretch ** 2
 
     def monitor_functions(self, u_of_t):
-        """P' = 0 as in RockerImpact; with the elastic support T' = c0 u0' + d0 u0'' = 0."""
+        """P' = 0 as in RockerImpact; with the elastic support T' = k(u0) u0' + d0 u0'' = 0,
+        k = dT/du0 of the bearing's spring."""
         monitors = super().monitor_functions(u_of_t)
         if not (self._d["contact"] and self.compliant and self.p.support_damping > 0.0):
             return monitors
@@ -215,7 +216,7 @@ class CrankRockerHammer(RockerImpact):
         def t_extremum(t, x):
             u = u_of_t(t)
             ddu = self._accelerations(x, u, self._force(x))[0]
-            return self._d["c0"] * x[1] + self.p.support_damping * ddu
+            return self.spring_rate(x[0]) * x[1] + self.p.support_damping * ddu
         t_extremum.terminal, t_extremum.direction = False, 0.0
         return [monitors[0], t_extremum]
 

@@ -26,6 +26,12 @@ c0 = k_n Tm^(1/3) from the paper's fixed-point iterations on the first-approxima
 (rocker_linear.linearise, to 0.1 %), at initialization with J_t and the impact speed V0, unless
 c_contact / c_support give them. With hertz_contact on, c0 still comes from that iteration.
 
+Hertzian bearing (effect hertz_support, with support_compliance; seed 004): the support is the
+nonlinear law the paper linearises, T = kappa |u0|^1.5 sgn(u0), kappa = (k_n/1.25)^1.5, with the
+potential energy 0.4 kappa |u0|^2.5. (The linearisation c0 = k_n Tm^(1/3) is 1.25 x its secant
+stiffness T/u0 = kappa^(2/3) T^(1/3) at T = Tm: the same 1.25 as the contact's c.) The contact's
+linearised c, when hertz_contact is off, still comes from the iteration with the linear c0.
+
 The geometry is linearised about the strike position (the paper's model: the strike point moves
 along the tool axis by S theta); a drive may swing the rocker through a few tenths of a radian
 before the strike, the impact itself happens at theta ~ 0.
@@ -85,6 +91,9 @@ class RockerImpact(PhysicsModel):
         Effect("hertz_contact", "Contact P = K delta^1.5 instead of the linearised spring c"),
         Effect("support_compliance", "Elastic pivot support c0 (off: pinned rocker, "
                                      "c0 -> infinity, strike-point mass J/S^2)", default=True),
+        Effect("hertz_support", "Hertzian bearing T = kappa |u0|^1.5 sgn(u0), kappa = "
+                                "(k_n/1.25)^1.5, instead of the linearised c0 (needs "
+                                "support_compliance)"),
     )
     inputs = (
         Variable("flange_tau", "N.m", "Drive torque on the rocker shaft", 0.0),
@@ -118,6 +127,8 @@ class RockerImpact(PhysicsModel):
     def __init__(self, parameters=None, effects=None):
         super().__init__(parameters, effects)
         self._d = self._fresh_discrete(c=0.0, c0=None, contact=False)
+        self._hertz_support = self.on("hertz_support")
+        self._kappa = (self.p.k_n / 1.25) ** 1.5  # N/m^1.5, the Hertzian bearing's constant
 
     def check(self, p):
         self._check_rocker(p, needs_V0=p.strike_at_start == 1.0)
@@ -147,6 +158,12 @@ class RockerImpact(PhysicsModel):
         if needs_c0 and p.k_n <= 0.0:
             raise ParameterError(self.model_name, "k_n", p.k_n,
                                  "> 0 when support_compliance is on and c_support = 0")
+        if self.on("hertz_support") and not self.on("support_compliance"):
+            raise ParameterError(self.model_name, "effect_hertz_support", True,
+                                 "only with effect support_compliance (a pinned pivot has no "
+                                 "bearing law)")
+        if self.on("hertz_support") and p.k_n <= 0.0:
+            raise ParameterError(self.model_name, "k_n", p.k_n, "> 0 with effect hertz_support")
 
     # -- helpers ---------------------------------------------------------------------------
     @property
@@ -204,7 +221,22 @@ class RockerImpact(PhysicsModel):
 
     def _support_force(self, u0: float, v0: float) -> float:
         """T of the elastic support at displacement u0, speed v0."""
+        return self._spring(u0)
+
+    def _spring(self, u0: float) -> float:
+        """The bearing's spring force: c0 u0, or kappa |u0|^1.5 sgn(u0) (hertz_support)."""
+        if self._hertz_support:
+            return self._kappa * math.copysign(abs(u0) ** 1.5, u0)
         return self._d["c0"] * u0
+
+    def spring_rate(self, u0: float) -> float:
+        """dT/du0 of the bearing's spring."""
+        return 1.5 * self._kappa * math.sqrt(abs(u0)) if self._hertz_support else self._d["c0"]
+
+    def _spring_energy(self, u0: float) -> float:
+        if self._hertz_support:
+            return 0.4 * self._kappa * abs(u0) ** 2.5
+        return 0.5 * self._d["c0"] * u0 * u0
 
     def _rocker_accelerations(self, x, P, torque, J_t, F_axis=0.0):
         """(u0'', theta'', T) for the contact force P, a torque on the rocker about the pivot,
@@ -230,7 +262,7 @@ class RockerImpact(PhysicsModel):
         J_t = p.J + u[1]
         E = 0.5 * p.m * v * v + p.m * p.r * v * om + 0.5 * J_t * om * om
         if self.compliant:
-            E += 0.5 * self._d["c0"] * u0 * u0
+            E += self._spring_energy(u0)
         if self._d["contact"]:
             dl = max(self.delta(x), 0.0)
             E += 0.4 * self._K * dl ** 2.5 if self.hertz else 0.5 * self._d["c"] * dl * dl
@@ -319,7 +351,8 @@ class RockerImpact(PhysicsModel):
                 "contact": 1.0 if d["contact"] else 0.0, "impulse": imp, "E_radiated": E_rad,
                 "P_peak": P_peak, "T_peak": T_peak, "impact_duration": duration,
                 "n_impacts": float(d["n_impacts"]), "c_contact_used": d["c"] or 0.0,
-                "c_support_used": d["c0"] or 0.0, "V_impact": d.get("V_impact", 0.0),
+                "c_support_used": 0.0 if self._hertz_support else d["c0"] or 0.0,
+                "V_impact": d.get("V_impact", 0.0),
                 "u_support": u0, "v_support": v0, "E_mech": self.mechanical_energy(x, u)}
 
     # -- hybrid part -----------------------------------------------------------------------
