@@ -19,6 +19,17 @@ from importer_support import (IMPORTER_STOP, catalog_fmus, jacobi_scene,  # noqa
 STOP = IMPORTER_STOP  # s (importer_support: 200 Jacobi steps of 1 ms)
 
 
+def gauss_seidel_run(jacobi_scene, fmu_dir, tmp_path):
+    """The Jacobi servo press run once with Gauss-Seidel: far from any engine's Jacobi numbers,
+    so agreement with Jacobi is not trivial."""
+    jacobi_scene.master.algorithm = "gauss-seidel"
+    try:
+        return run_scene(jacobi_scene, RunOptions(out=tmp_path / "gs.csv", fmu_dir=fmu_dir,
+                                                  progress=False)).recorder
+    finally:
+        jacobi_scene.master.algorithm = "jacobi"
+
+
 @pytest.mark.parametrize("model", list(FMU_MODELS))
 def test_every_fmu_runs_alone_on_its_start_values(catalog_fmus, model):
     """No input connected, nothing set: ecos initializes and steps the FMU for 0.05 s, and gives
@@ -57,12 +68,7 @@ def test_servo_press_in_ecos_equals_crankfmu_jacobi(jacobi_scene, fmu_dir, tmp_p
         assert dev < 1e-9, f"{name}: ecos vs crankfmu Jacobi deviate by {dev:.3g}"
     assert rec.column("press.phi")[-1] > 1.0 and np.max(rec.column("press.F5")) > 0.0
     # and not trivially: Gauss-Seidel at the same step is far from ecos's Jacobi
-    jacobi_scene.master.algorithm = "gauss-seidel"
-    try:
-        gs = run_scene(jacobi_scene, RunOptions(out=tmp_path / "gs.csv", fmu_dir=fmu_dir,
-                                                progress=False)).recorder
-    finally:
-        jacobi_scene.master.algorithm = "jacobi"
+    gs = gauss_seidel_run(jacobi_scene, fmu_dir, tmp_path)
     assert relative_deviation(result.column("press.w_crank"), gs.column("press.w_crank")) > 1e-7
 
 
@@ -194,10 +200,5 @@ def test_servo_press_ssp_in_the_native_ecos_cli_equals_crankfmu_jacobi(jacobi_sc
           f"{got['time'][-1]:g} s = {got['press.w_crank'][-1]:.6f} rad/s")
     assert got["press.phi"][-1] > 1.0
     # 6 decimals tell the masters apart: Gauss-Seidel at the same step is far from ecos
-    jacobi_scene.master.algorithm = "gauss-seidel"
-    try:
-        gs = run_scene(jacobi_scene, RunOptions(out=tmp_path / "gs.csv", fmu_dir=fmu_dir,
-                                                progress=False)).recorder
-    finally:
-        jacobi_scene.master.algorithm = "jacobi"
+    gs = gauss_seidel_run(jacobi_scene, fmu_dir, tmp_path)
     assert np.max(np.abs(got["press.w_crank"] - gs.column("press.w_crank")[:n])) > 1e-4

@@ -287,7 +287,8 @@ class PhysicsModel:
                 sol = self._integrate_scipy(rhs, u_of_t, t, x, t_end, rtol, atol, events, limit)
             else:
                 sol = dopri.integrate(rhs, t, x, t_end, TOLERANCE_FACTOR * rtol,
-                                      [TOLERANCE_FACTOR * a for a in _per_state(atol, len(x))],
+                                      [TOLERANCE_FACTOR * a for a in dopri.per_state(atol,
+                                                                                   len(x))],
                                       self._h_next, events, limit)
                 self._h_next = sol.h_next
         except dopri.IntegrationFailure as err:
@@ -334,10 +335,6 @@ class PhysicsModel:
 
     def _jac_for(self, u_of_t: InputFunction):
         return lambda s, y: self.jacobian(s, y, u_of_t(s))
-
-
-def _per_state(atol, n: int) -> list:
-    return [float(atol)] * n if isinstance(atol, (int, float)) else list(atol)
 
 
 class InputPolynomial:

@@ -70,6 +70,11 @@ class Integration:
     calls: int = 0                     # right-hand-side evaluations
 
 
+def per_state(atol, n: int) -> list:
+    """The absolute tolerance per state, from one number for all or a sequence."""
+    return [float(atol)] * n if isinstance(atol, (int, float)) else list(atol)
+
+
 def _rms(values: Sequence[float]) -> float:
     return math.sqrt(sum(float(v) * float(v) for v in values) / len(values))
 
@@ -165,7 +170,7 @@ def integrate(f: Callable[[float, Vector], Sequence[float]], t0: float, x0: Sequ
     evaluations (checked before each step attempt).
     """
     x = list(x0)
-    atol = [float(atol)] * len(x) if isinstance(atol, (int, float)) else atol
+    atol = per_state(atol, len(x))
     t = float(t0)
     k1 = f(t, x)
     calls = 1
