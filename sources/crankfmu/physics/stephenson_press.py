@@ -181,8 +181,8 @@ class StephensonPress(PhysicsModel):
 
     def J_constant(self, J_input: float) -> float:
         """J_c = i^2 J_input + J1 + m2 r^2 (base link in circular translation, eq. 21-22)."""
-        p = self.p
-        return p.gear_ratio ** 2 * J_input + p.J1 + p.m2 * p.r ** 2
+        i2_, J_fixed = self._constants[3:5]
+        return i2_ * J_input + J_fixed
 
     # -- contract --------------------------------------------------------------------------
     def state_names(self):
