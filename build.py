@@ -11,8 +11,8 @@ TREE = Path(__file__).resolve().parent
 _installed = importlib.util.find_spec("crankfmu")  # before this tree goes on sys.path
 sys.path.insert(0, str(TREE / "sources"))
 
-from crankfmu.cosim.wiring import tree_differences  # noqa: E402
-from crankfmu.fmi.build import main  # noqa: E402
+from crankfmu.system.wiring import tree_differences  # noqa: E402
+from crankfmu.fmu.build import main  # noqa: E402
 
 if __name__ == "__main__":
     print(f"building from the sources at {TREE / 'sources' / 'crankfmu'}")

@@ -40,11 +40,11 @@ CLOCK = time.process_time
 
 NOOP_SCRIPT = '''"""No-op FMU for benchmarks/masters.py (build {digest}): no states, constant outputs."""
 if locals() is not globals():  # pythonfmu's findClass releases globals() after this run: see
-    import ctypes as _ctypes  # crankfmu/fmi/build.py ENTRY_SCRIPT
+    import ctypes as _ctypes  # crankfmu/fmu/build.py ENTRY_SCRIPT
     _ctypes.pythonapi.Py_IncRef(_ctypes.py_object(globals()))
 import numpy as np
-from crankfmu_rt_{digest}.slaves.base import ModelSlave as Fmi2Slave
-from crankfmu_rt_{digest}.physics.base import PhysicsModel, Variable
+from crankfmu_rt_{digest}.runtime.slave import ModelSlave as Fmi2Slave
+from crankfmu_rt_{digest}.runtime.model import PhysicsModel, Variable
 
 _OUT = np.array([1.0, 2.0, 3.0])
 
@@ -123,14 +123,15 @@ def build_script_fmu(dest: Path, name: str, template: str, runtime: bool = True,
 
     from pythonfmu.builder import FmuBuilder
 
-    from crankfmu.fmi.build import ZIP_DATE, _write_runtime, current_build_id
-    from crankfmu.fmi.model_description import model_description
+    from crankfmu.fmu.build import ZIP_DATE, _write_runtime, current_build_id
+    from crankfmu.fmu.model_description import model_description
 
-    digest = current_build_id()
+    model = fields.get("cls")  # a catalog model the script subclasses: bundled with the runtime
+    digest = current_build_id(model)
     dest.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="crankfmu_bench_") as tmp:
         tmp = Path(tmp)
-        files = [_write_runtime(tmp, digest)] if runtime else []
+        files = [_write_runtime(tmp, model, digest)] if runtime else []
         script = tmp / f"crankfmu_{digest}_{name}.py"
         script.write_text(template.format(digest=digest, name=name, **fields))
         sys.path.insert(0, str(tmp))
@@ -155,7 +156,7 @@ def build_script_fmu(dest: Path, name: str, template: str, runtime: bool = True,
 
 
 def noop_scene(fmu: Path, folder: Path, step: float, stop: float):
-    from crankfmu.scenario import load_scene
+    from crankfmu.system.load import load_scene
 
     path = folder / "noop_pair.toml"
     path.write_text(NOOP_SCENE.format(stop=stop, step=step, fmu=fmu.as_posix()))
@@ -183,7 +184,7 @@ class BareFmu:
     """One initialized FMU instance with raw ctypes calls for a fixed value-reference set."""
 
     def __init__(self, name: str, path: Path, inputs, coupled, recorded):
-        from crankfmu.cosim.fmu import FmuInstance, LogCollector
+        from crankfmu.fmu.instance import FmuInstance, LogCollector
 
         self.log = LogCollector()  # same callbacks as the runner gives its instances
         self.fmu = FmuInstance(name, path, self.log)
@@ -301,8 +302,8 @@ def time_to_reach(points: list[tuple[float, float]], target: float) -> tuple[flo
 
 
 def accuracy_table(out: Path, stop: float, fmu_dir: Path | None, quick: bool):
-    from crankfmu.accuracy import AccuracyOptions, format_orders, run_accuracy
-    from crankfmu.scenario import load_scene
+    from crankfmu.studies.accuracy import AccuracyOptions, format_orders, run_accuracy
+    from crankfmu.system.load import load_scene
 
     scene = load_scene(ROOT / "scenarios" / "servo_press.toml")
     scene.stop_time = stop

@@ -67,7 +67,7 @@ class FmuTimer:
         self.cpu = {"step": 0.0, "io": 0.0}
         self.calls = 0
         for name, module in list(sys.modules.items()):
-            if name.startswith("crankfmu_rt_") and name.endswith(".slaves.base"):
+            if name.startswith("crankfmu_rt_") and name.endswith(".runtime.slave"):
                 for method, bucket in self.METHODS.items():
                     self._wrap(module.ModelSlave, method, bucket)
 
@@ -91,7 +91,7 @@ class FmuTimer:
 def load(scene_path: Path, stop_time: float | None, fmu_dir: Path):
     """The scene with every component's FMU given as a file in `fmu_dir`, so every engine runs
     the FMUs built once at the start (sources edited meanwhile do not trigger a rebuild)."""
-    from crankfmu.scenario import load_scene
+    from crankfmu.system.load import load_scene
     scene = load_scene(scene_path)
     if stop_time is not None:
         scene.stop_time = stop_time
@@ -133,7 +133,7 @@ def run_fmpy_ssp(scene, ssp: Path):
     those after the step, so the rows are relabelled t + h."""
     from fmpy.ssp.simulation import simulate_ssp
 
-    from crankfmu.ssp.export import fmpy_parameter_set
+    from crankfmu.system.ssp_export import fmpy_parameter_set
     h = scene.master.step
     rows = simulate_ssp(str(ssp), start_time=scene.start_time, stop_time=scene.stop_time,
                         step_size=h, parameter_set=fmpy_parameter_set(ssp))
@@ -301,8 +301,8 @@ def main(argv=None) -> int:
 
 
 def run_all(args, tmp: Path) -> str:
-    from crankfmu.fmi.build import build_all
-    from crankfmu.scenario import load_scene
+    from crankfmu.fmu.build import build_all
+    from crankfmu.system.load import load_scene
     args.fmus = (args.fmus or tmp / "fmus").resolve()
     with contextlib.redirect_stdout(sys.stderr):
         build_all(args.fmus, sorted({c.fmu for c in load_scene(args.scene).components.values()}),
@@ -311,7 +311,7 @@ def run_all(args, tmp: Path) -> str:
     names = args.engines.split(",") if args.engines else engines()
     ssp = None
     if "fmpy-ssp" in names:
-        from crankfmu.ssp.export import export_ssp
+        from crankfmu.system.ssp_export import export_ssp
         ssp = export_ssp(scene, tmp / f"{scene.name}.ssp", args.fmus)
     ref_scene = load_scene(args.scene)  # catalog names: the reference composes their physics
     ref_scene.stop_time = scene.stop_time

@@ -43,11 +43,11 @@ CLOCK = time.process_time
 SERVO_PRESS = ROOT / "scenarios" / "servo_press.toml"
 
 NOOP_LIKE = '''"""A {cls} with its physics replaced by constant outputs (benchmarks/runtime.py)."""
-if locals() is not globals():  # see crankfmu/fmi/build.py ENTRY_SCRIPT
+if locals() is not globals():  # see crankfmu/fmu/build.py ENTRY_SCRIPT
     import ctypes as _ctypes
     _ctypes.pythonapi.Py_IncRef(_ctypes.py_object(globals()))
-from crankfmu_rt_{digest}.slaves.base import ModelSlave as Fmi2Slave
-from crankfmu_rt_{digest}.physics.{module} import {cls} as _Physics
+from crankfmu_rt_{digest}.runtime.slave import ModelSlave as Fmi2Slave
+from crankfmu_rt_{digest}.models.{module} import {cls} as _Physics
 
 
 class _NoOp(_Physics):
@@ -112,7 +112,7 @@ def run_cpu_per_step(scene, n: int, folder: Path, fmu_dir: Path | None = None) -
 # -- (a) ---------------------------------------------------------------------------------------
 def part_a(out: Path, n: int, repeats: int) -> None:
     from crankfmu.cosim.runner import RunOptions, run_scene
-    from crankfmu.scenario import load_scene
+    from crankfmu.system.load import load_scene
 
     scene = load_scene(SERVO_PRESS)
     noop_dir = out / "noop_like"
@@ -211,7 +211,7 @@ def part_b(out: Path, n: int, repeats: int) -> None:
 # -- (c) ---------------------------------------------------------------------------------------
 def _alone_seconds(fmu_path: Path, model, effects: list[str], n: int,
                    parameters: dict | None = None) -> float | str:
-    from crankfmu.cosim.fmu import FmuInstance, LogCollector
+    from crankfmu.fmu.instance import FmuInstance, LogCollector
 
     log = LogCollector()
     fmu = FmuInstance("alone", fmu_path, log)
@@ -235,8 +235,8 @@ def _alone_seconds(fmu_path: Path, model, effects: list[str], n: int,
 
 
 def part_c(n: int) -> None:
-    from crankfmu.fmi.build import build_all
-    from crankfmu.physics.catalog import FMU_MODELS, physics_class
+    from crankfmu.fmu.build import build_all
+    from crankfmu.models.catalog import FMU_MODELS, physics_class
 
     fmu_dir = ROOT / "fmus"
     build_all(fmu_dir, check=False) if not all(
@@ -266,12 +266,12 @@ def part_c(n: int) -> None:
 def part_d(out: Path, target: float = 1e-4) -> None:
     from scipy.integrate import solve_ivp
 
-    from crankfmu.accuracy import make_metric
-    from crankfmu.accuracy.sweep import load_or_solve_reference
+    from crankfmu.studies.accuracy import make_metric
+    from crankfmu.studies.accuracy.sweep import load_or_solve_reference
     from crankfmu.cosim.runner import RunOptions, run_scene
     from crankfmu.reference.composed import ComposedModel
     from crankfmu.reference.solve import RecordMap, record_times
-    from crankfmu.scenario import load_scene
+    from crankfmu.system.load import load_scene
 
     scene = load_scene(SERVO_PRESS)
     scene.stop_time = 1.0

@@ -35,8 +35,8 @@ def main() -> int:
     import os
 
     import crankfmu
-    from crankfmu.cosim.wiring import resolve_fmu
-    from crankfmu.scenario import load_scene
+    from crankfmu.system.wiring import resolve_fmu
+    from crankfmu.system.load import load_scene
 
     scene_path = ROOT / "scenarios" / "servo_press.toml"
     scene = load_scene(scene_path)

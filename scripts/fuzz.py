@@ -259,7 +259,7 @@ def main() -> int:
     work.mkdir(parents=True, exist_ok=True)
     fmus = args.fmus
     if fmus is None:
-        from crankfmu.fmi.build import build_all
+        from crankfmu.fmu.build import build_all
         fmus = work / "fmus"
         build_all(fmus)
     fmus = fmus.resolve()
@@ -272,8 +272,8 @@ def main() -> int:
     if args.scenes:
         groups.append(("scenes", scene_cases(args.seed, args.scenes)))
     if args.ssp:
-        from crankfmu.scenario import load_scene
-        from crankfmu.ssp import export_ssp
+        from crankfmu.system.load import load_scene
+        from crankfmu.system.ssp_export import export_ssp
         from fuzz.scenes import ROTOR
         (work / "rotor.toml").write_text(ROTOR)
         base = export_ssp(load_scene(work / "rotor.toml"), work / "rotor.ssp", fmus).read_bytes()

@@ -11,7 +11,7 @@ SCENARIOS = ROOT / "scenarios"
 
 @pytest.fixture(scope="session")
 def fmu_dir(tmp_path_factory) -> Path:
-    from crankfmu.fmi.build import build_all
+    from crankfmu.fmu.build import build_all
 
     dest = tmp_path_factory.mktemp("fmus")
     build_all(dest, ["DcServoMotor", "StephensonPress"])
@@ -20,7 +20,7 @@ def fmu_dir(tmp_path_factory) -> Path:
 
 @pytest.fixture
 def servo_scene():
-    from crankfmu.scenario import load_scene
+    from crankfmu.system.load import load_scene
 
     return load_scene(SCENARIOS / "servo_press.toml")
 

@@ -20,10 +20,10 @@ import tomllib
 
 import numpy as np
 
-from crankfmu.physics.induction_motor import InductionMotor
-from crankfmu.physics.planetary_drive import I_PHI, I_W, U_CMD, PlanetaryClutchDrive
-from crankfmu.physics.stephenson_press import StephensonPress
-from crankfmu.scenario import load_scene
+from crankfmu.models.induction_motor.induction_motor import InductionMotor
+from crankfmu.models.planetary_drive.planetary_drive import I_PHI, I_W, U_CMD, PlanetaryClutchDrive
+from crankfmu.models.stephenson_press.stephenson_press import StephensonPress
+from crankfmu.system.load import load_scene
 
 
 EVENT_TIMES = ("t_slip_h", "t_lock_b", "t_slip_b", "t_lock_h", "n_events")

@@ -27,8 +27,8 @@ IMPORTER_STOP = 0.2  # s: 200 Jacobi steps of 1 ms, through the start-up transie
 @pytest.fixture(scope="module")
 def catalog_fmus(tmp_path_factory) -> Path:
     """Every FMU of the catalog, built once per test module (import it into the module)."""
-    from crankfmu.fmi.build import build_all
-    from crankfmu.physics.catalog import FMU_MODELS
+    from crankfmu.fmu.build import build_all
+    from crankfmu.models.catalog import FMU_MODELS
 
     dest = tmp_path_factory.mktemp("catalog_fmus")
     build_all(dest, list(FMU_MODELS), check=False)
@@ -39,7 +39,7 @@ def catalog_fmus(tmp_path_factory) -> Path:
 def jacobi_scene():
     """The servo press as the peers run it: Jacobi, inputs held over the step, the FMUs' default
     tolerance (1e-8), stopped after IMPORTER_STOP."""
-    from crankfmu.scenario import load_scene
+    from crankfmu.system.load import load_scene
     scene = load_scene(Path(__file__).resolve().parents[1] / "scenarios" / "servo_press.toml")
     scene.stop_time = IMPORTER_STOP
     scene.master.algorithm, scene.master.extrapolation = "jacobi", 0
@@ -55,8 +55,8 @@ def relative_deviation(a: np.ndarray, b: np.ndarray) -> float:
 
 def build_catalog(dest: Path) -> dict[str, Path]:
     """Every FMU of the catalog built into `dest` (new models are picked up automatically)."""
-    from crankfmu.fmi.build import build_all
-    from crankfmu.physics.catalog import FMU_MODELS
+    from crankfmu.fmu.build import build_all
+    from crankfmu.models.catalog import FMU_MODELS
 
     return dict(zip(FMU_MODELS, build_all(dest, list(FMU_MODELS))))
 
@@ -71,7 +71,7 @@ def step_together(specs, h: float, n_steps: int, rtol: float) -> dict[str, tuple
     with fmpy (through crankfmu's FmuInstance), initialize them, then step them interleaved:
     doStep(n h, h) for each in turn, n = 0 .. n_steps - 1. All Real outputs are sampled after
     initialization and after every step. Returns {name: (output names, rows of [t, outputs])}."""
-    from crankfmu.cosim.fmu import FmuInstance
+    from crankfmu.fmu.instance import FmuInstance
 
     fmus = {name: FmuInstance(name, path) for name, path, _ in specs}
     names = {n: [v.name for v in real_outputs(f.model_description)] for n, f in fmus.items()}

@@ -1,7 +1,7 @@
 """Independent references for the planetary clutch drive + induction motor (tests only).
 
 1. `reference_run`: a MONOLITHIC motor + drive ODE written independently of
-   crankfmu.physics.planetary_drive: Newton-Euler equations of sun, ring and carrier with the
+   crankfmu.models.planetary_drive.planetary_drive: Newton-Euler equations of sun, ring and carrier with the
    tooth force R of the (massless) planets as an unknown, instead of the model's Lagrange form:
 
        J_a a_a = M_m(w_a) - M_ca - R r_a

@@ -27,8 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from crankfmu.physics.dc_motor import DcServoMotor
-from crankfmu.physics.stephenson_press import StephensonPress
+from crankfmu.models.dc_motor.dc_motor import DcServoMotor
+from crankfmu.models.stephenson_press.stephenson_press import StephensonPress
 
 TWO_PI = 2.0 * math.pi
 

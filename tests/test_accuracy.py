@@ -1,4 +1,4 @@
-"""The accuracy sweep (crankfmu.accuracy, `crankfmu accuracy`): metrics, observed order, the
+"""The accuracy sweep (crankfmu.studies.accuracy, `crankfmu accuracy`): metrics, observed order, the
 choice of the cheapest setting, and a short sweep on the servo press producing table, CSV, PNG."""
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from crankfmu.accuracy import (Outcome, Setting, cheapest, fewest_steps, make_metric,
-                               observed_order, steady_figures)
-from crankfmu.accuracy.metrics import MetricError, ReferenceSamples
-from crankfmu.accuracy.sweep import load_or_solve_reference, orders
+from crankfmu.studies.accuracy import (Outcome, Setting, cheapest, fewest_steps, make_metric,
+                                       observed_order, steady_figures)
+from crankfmu.studies.accuracy.metrics import MetricError, ReferenceSamples
+from crankfmu.studies.accuracy.sweep import load_or_solve_reference, orders
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 
@@ -113,7 +113,7 @@ def test_max_metric_and_reference_lookup_off_the_grid():
 def test_short_servo_press_sweep_writes_table_csv_and_plot(fmu_dir, tmp_path, capsys):
     """Gauss-Seidel and Jacobi, extrapolation 0, steps 2 and 1 ms over 0.3 s of run-up."""
     from crankfmu.cli import main
-    from crankfmu.scenario import load_scene
+    from crankfmu.system.load import load_scene
 
     out = tmp_path / "acc"
     assert main(["accuracy", str(SCENARIOS / "servo_press.toml"), "--stop-time", "0.3",

@@ -68,7 +68,7 @@ def test_simulate_writes_with_out_and_fmpy_reads_it(tmp_path, fmu_dir):
 
 
 def test_set_reaches_parameters_inputs_and_master(servo_scene):
-    from crankfmu.scenario.scene import SceneError, apply_overrides
+    from crankfmu.system.scene import SceneError, apply_overrides
     apply_overrides(servo_scene, ["press.F_max=6e4", "motor.u=200", "master.step=2e-3",
                                   "master.algorithm=jacobi", "master.extrapolation=2"])
     assert servo_scene.components["press"].parameters["F_max"] == 6e4

@@ -112,8 +112,8 @@ def test_a_build_names_its_sources_and_warns_when_the_tree_differs(tmp_path, cap
     import shutil
 
     from crankfmu.cli import setup_logging
-    from crankfmu.cosim.wiring import tree_differences, warn_if_tree_differs
-    from crankfmu.fmi.build import PACKAGE_DIR
+    from crankfmu.system.wiring import tree_differences, warn_if_tree_differs
+    from crankfmu.fmu.build import PACKAGE_DIR
     tree = tmp_path / "tree"
     shutil.copytree(PACKAGE_DIR, tree / "sources" / "crankfmu",
                     ignore=shutil.ignore_patterns("__pycache__"))
@@ -121,12 +121,12 @@ def test_a_build_names_its_sources_and_warns_when_the_tree_differs(tmp_path, cap
     assert tree_differences(PACKAGE_DIR) == []  # the package itself
     motor = tree / "sources" / "crankfmu" / "physics" / "dc_motor.py"
     motor.write_text(motor.read_text() + "# an edit\n")
-    assert tree_differences(tree / "sources" / "crankfmu") == ["physics/dc_motor.py"]
+    assert tree_differences(tree / "sources" / "crankfmu") == ["models/dc_motor/dc_motor.py"]
     setup_logging(0)
     warn_if_tree_differs(tree)
     err = capsys.readouterr().err
     assert err.startswith("warning: the FMUs are built from the installed crankfmu at ")
-    assert "physics/dc_motor.py" in err and "pip install -e" in err
+    assert "models/dc_motor/dc_motor.py" in err and "pip install -e" in err
 
 
 def test_verbosity_and_the_build_message(tmp_path, capsys):

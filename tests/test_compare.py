@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from conftest import SCENARIOS
-from crankfmu.compare import Series, metrics, stroke_ends
-from crankfmu.scenario import SceneError, load_scene
+from crankfmu.studies.compare import Series, metrics, stroke_ends
+from crankfmu.system.scene import SceneError
+from crankfmu.system.load import load_scene
 
 
 # -- [swap] ------------------------------------------------------------------------------------
@@ -97,7 +98,7 @@ def test_metrics_known_answers():
 # -- the README example, short ------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def fmus(tmp_path_factory):
-    from crankfmu.fmi.build import build_all
+    from crankfmu.fmu.build import build_all
     dest = tmp_path_factory.mktemp("compare_fmus")
     build_all(dest, ["DcServoMotor", "StephensonPress", "InductionMotor", "PlanetaryClutchDrive"])
     return dest
@@ -128,7 +129,7 @@ def test_compare_command_servo_vs_conventional(fmus, tmp_path, capsys):
 
 
 def test_compare_needs_analysis(tmp_path):
-    from crankfmu.compare import analysis_roles
+    from crankfmu.studies.compare import analysis_roles
     s = load_scene(SCENARIOS / "planetary_engagement.toml")
     with pytest.raises(SceneError, match=r"\[analysis\].*required by compare"):
         analysis_roles(s)

@@ -21,7 +21,7 @@ import pytest
 import conventional_press_reference as C
 from conftest import SCENARIOS
 from crankfmu.cosim.runner import RunOptions, run_scene
-from crankfmu.scenario import load_scene
+from crankfmu.system.load import load_scene
 
 SCENE = SCENARIOS / "conventional_press.toml"
 T = 0.9  # s: the first stroke, engage at 0.1 s to the carrier's lock at ~0.78 s
@@ -33,7 +33,7 @@ EVENTS = ("t_slip_h", "t_lock_b", "t_slip_b", "t_lock_h")
 
 @pytest.fixture(scope="module")
 def fmus(tmp_path_factory):
-    from crankfmu.fmi.build import build_all
+    from crankfmu.fmu.build import build_all
     dest = tmp_path_factory.mktemp("conventional_fmus")
     build_all(dest, ["InductionMotor", "PlanetaryClutchDrive", "StephensonPress"])
     return dest

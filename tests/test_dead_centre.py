@@ -17,8 +17,8 @@ import math
 import numpy as np
 import pytest
 
-from crankfmu.physics.base import ParameterError, held
-from crankfmu.physics.catalog import make_physics
+from crankfmu.runtime.model import ParameterError, held
+from crankfmu.models.catalog import make_physics
 
 RATIOS = (1.01, 1.001)
 R = 0.05  # m

@@ -6,14 +6,14 @@ import copy
 import json
 import math
 
-from crankfmu.scenario import load_scene
+from crankfmu.system.load import load_scene
 from crankfmu.studies.executor import LocalPoolExecutor
 
 from conftest import SCENARIOS
 
 
 def test_accuracy_on_a_pool_equals_serial(fmu_dir, tmp_path):
-    from crankfmu.accuracy import AccuracyOptions, run_accuracy
+    from crankfmu.studies.accuracy import AccuracyOptions, run_accuracy
 
     results = {}
     for jobs in (1, 2):
@@ -38,7 +38,7 @@ def test_accuracy_on_a_pool_equals_serial(fmu_dir, tmp_path):
 
 
 def test_compare_on_a_pool_equals_serial(fmu_dir, tmp_path):
-    from crankfmu.compare import compare_scenes
+    from crankfmu.studies.compare import compare_scenes
     from crankfmu.cosim.runner import RunOptions
 
     def scenes():
@@ -61,8 +61,8 @@ def test_accuracy_and_compare_on_a_dask_cluster_equal_serial(fmu_dir, tmp_path):
     """The same two studies on a LocalCluster of 2 worker processes (127.0.0.1): the numbers
     and the run files equal the serial path's."""
     distributed = __import__("pytest").importorskip("distributed")
-    from crankfmu.accuracy import AccuracyOptions, run_accuracy
-    from crankfmu.compare import compare_scenes
+    from crankfmu.studies.accuracy import AccuracyOptions, run_accuracy
+    from crankfmu.studies.compare import compare_scenes
     from crankfmu.cosim.runner import RunOptions
     from crankfmu.studies.executor import DaskExecutor
 

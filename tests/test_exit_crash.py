@@ -3,7 +3,7 @@ without owning that reference (findClass: Py_DECREF on the borrowed PyModule_Get
 alone, the namespace's reference count falls below the number of objects using it, it is freed
 while still in use, and processes that load FMUs crash at interpreter exit ("corrupted
 double-linked list", SIGABRT). The generated entry script takes that reference back (see
-fmi/build.py ENTRY_SCRIPT). This test counts references, so it fails deterministically where the
+fmu/build.py ENTRY_SCRIPT). This test counts references, so it fails deterministically where the
 crash itself is only sporadic.
 """
 from __future__ import annotations
@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 from fmpy import read_model_description
 
-from crankfmu.cosim.fmu import FmuInstance
+from crankfmu.fmu.instance import FmuInstance
 
 INSTANTIATIONS = 8  # each one used to release one reference; 8 leaves a clear deficit
 
@@ -53,7 +53,7 @@ def test_entry_namespace_is_never_over_released(fmu_dir, model):
 
 
 def test_exit_release_reaches_every_loaded_copy_of_the_binary(fmu_dir):
-    """Each FMU content is unpacked once per process (crankfmu.cosim.fmu.extract_fmu), so its
+    """Each FMU content is unpacked once per process (crankfmu.fmu.instance.extract_fmu), so its
     binary is loaded once however many instances and runs use it; two FMUs are two copies. The
     atexit release must find each copy still loaded, or that copy's destructor corrupts the heap
     at exit (measured before: valgrind, one invalid access in finalizePythonInterpreter per
@@ -64,7 +64,7 @@ def test_exit_release_reaches_every_loaded_copy_of_the_binary(fmu_dir):
         f"sys.path.insert(0, {str(Path(__file__).parent)!r})\n"
         "from pathlib import Path\n"
         "from test_exit_crash import _cycle\n"
-        "from crankfmu.cosim.fmu import release_pythonfmu_states\n"
+        "from crankfmu.fmu.instance import release_pythonfmu_states\n"
         "for k in range(3):\n"
         f"    _cycle(Path({str(fmu_dir / 'DcServoMotor.fmu')!r}), f'm{{k}}')\n"
         f"    _cycle(Path({str(fmu_dir / 'StephensonPress.fmu')!r}), f'p{{k}}')\n"

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from fmpy.fmi1 import FMICallException
 
-from crankfmu.cosim.fmu import FmuInstance, LogCollector
+from crankfmu.fmu.instance import FmuInstance, LogCollector
 
 
 def start(fmu_dir, model, values, name="x", tolerance=1e-8, log=None):

@@ -6,7 +6,7 @@ import zipfile
 
 from fmpy import read_model_description
 
-from crankfmu.fmi.build import build_fmu, validate
+from crankfmu.fmu.build import build_fmu, validate
 
 MODELS = ("DcServoMotor", "StephensonPress")
 

@@ -22,7 +22,7 @@ SLOW_SSP_KINDS = {"fmu_entry_huge", "many_entries", "ssd_huge", "external_ssv_hu
 
 @pytest.fixture(scope="module")
 def fuzz_fmus(fmu_dir) -> Path:
-    from crankfmu.fmi.build import build_all
+    from crankfmu.fmu.build import build_all
     build_all(fmu_dir, ["Rotor", "ShaftRotor"])  # beside the session's motor and press
     return fmu_dir
 
@@ -55,8 +55,8 @@ def test_one_scene_file_of_each_kind(tmp_path, fuzz_fmus, monkeypatch, capsys):
 
 
 def test_hostile_ssp_archives(tmp_path, fuzz_fmus, monkeypatch, capsys):
-    from crankfmu.scenario import load_scene
-    from crankfmu.ssp import export_ssp
+    from crankfmu.system.load import load_scene
+    from crankfmu.system.ssp_export import export_ssp
     (tmp_path / "rotor.toml").write_text(ROTOR)
     base = export_ssp(load_scene(tmp_path / "rotor.toml"), tmp_path / "rotor.ssp",
                       fuzz_fmus).read_bytes()

@@ -12,11 +12,11 @@ import pytest
 
 from crankfmu.commands.analyze import hammer_blows
 from crankfmu.cosim.runner import RunOptions, run_scene
-from crankfmu.physics.base import held
-from crankfmu.physics.rocker_analysis import RockerData, exact_linear, linearise
-from crankfmu.physics.rocker_impact import RockerImpact
-from crankfmu.scenario import load_scene
-from crankfmu.scenario.scene import apply_overrides
+from crankfmu.runtime.model import held
+from crankfmu.studies.rocker_analysis import RockerData, exact_linear, linearise
+from crankfmu.models.rocker_impact.rocker_impact import RockerImpact
+from crankfmu.system.load import load_scene
+from crankfmu.system.scene import apply_overrides
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 S_P = RockerData().S_percussion
@@ -24,7 +24,7 @@ S_P = RockerData().S_percussion
 
 @pytest.fixture(scope="module")
 def fmus(tmp_path_factory) -> Path:
-    from crankfmu.fmi.build import build_all
+    from crankfmu.fmu.build import build_all
 
     dest = tmp_path_factory.mktemp("hammer_fmus")
     build_all(dest, ["DcServoMotor", "RockerImpact", "CrankRockerHammer"])

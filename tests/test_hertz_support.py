@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from crankfmu.physics.base import held
-from crankfmu.physics.catalog import make_physics
+from crankfmu.runtime.model import held
+from crankfmu.models.catalog import make_physics
 
 EFFECTS = ["support_compliance", "hertz_contact", "hertz_support"]
 
@@ -89,7 +89,7 @@ def test_hertzian_bearing_against_an_independent_solution():
 
 
 def test_hertz_support_needs_the_elastic_support():
-    from crankfmu.physics.base import ParameterError
+    from crankfmu.runtime.model import ParameterError
     with pytest.raises(ParameterError, match="only with effect support_compliance"):
         make_physics("RockerImpact", {}, ["hertz_support"])
 

@@ -24,8 +24,9 @@ import pytest
 from crankfmu.cli import main
 from crankfmu.cosim.runner import RunError, RunOptions, run_scene
 from crankfmu.errors import CrankfmuError
-from crankfmu.scenario import SceneError, load_scene
-from crankfmu.scenario.scene import apply_overrides
+from crankfmu.system.scene import SceneError
+from crankfmu.system.load import load_scene
+from crankfmu.system.scene import apply_overrides
 
 from conftest import ROOT, SCENARIOS
 from fuzz.scenes import LOOP
@@ -58,7 +59,7 @@ variables = ["r1.flange_w", "r2.w", "r1.E"]
 
 @pytest.fixture(scope="session")
 def rotors(tmp_path_factory) -> Path:
-    from crankfmu.fmi.build import build_all
+    from crankfmu.fmu.build import build_all
 
     dest = tmp_path_factory.mktemp("hostile_rotor_fmus")
     build_all(dest, ["Rotor", "ShaftRotor"])
@@ -90,7 +91,7 @@ def run_cli(*args, env=None, cwd=ROOT, timeout=120):
 
 # -- security ------------------------------------------------------------------------------------
 def _export(fmu_dir, tmp_path) -> Path:
-    from crankfmu.ssp import export_ssp
+    from crankfmu.system.ssp_export import export_ssp
     scene = load_scene(SCENARIOS / "servo_press.toml")
     scene.stop_time = 0.01
     return export_ssp(scene, tmp_path / "servo.ssp", fmu_dir)
@@ -157,7 +158,7 @@ def _rewrite_ssd(src: Path, dst: Path, change, extra: dict | None = None) -> Pat
 
 def test_ssp_entries_are_size_limited_while_streaming(fmu_dir, tmp_path, monkeypatch):
     """Before: a 1 GiB entry was read whole into memory and written to the temp cache."""
-    from crankfmu.ssp import load as ssp_load
+    from crankfmu.system import ssp_load
     ssp = _export(fmu_dir, tmp_path)
     # an SSD of 20 MiB (the XML limit is 16 MiB) compresses to a few KiB
     big = _rewrite_ssd(ssp, tmp_path / "big_ssd.ssp",
@@ -292,7 +293,7 @@ def test_loop_detection_follows_declared_dependencies():
     `dependencies` attribute depends on every input (FMI 2.0)."""
     from types import SimpleNamespace as NS
 
-    from crankfmu.cosim.wiring import Link, algebraic_loops
+    from crankfmu.system.wiring import Link, algebraic_loops
 
     def fmu(inputs, outputs):  # outputs: name -> list of inputs, or None (attribute absent)
         variables = {n: NS(name=n, causality="input") for n in inputs}
@@ -312,9 +313,9 @@ def test_loop_detection_follows_declared_dependencies():
 
 def test_the_scenes_have_no_algebraic_loop(fmu_dir):
     """The shipped scenes that run on the FMUs built in the session: no loop is declared."""
-    from crankfmu.cosim.fmu import LogCollector
+    from crankfmu.fmu.instance import LogCollector
     from crankfmu.cosim.runner import close_fmus, load_fmus
-    from crankfmu.cosim.wiring import algebraic_loops, check_links
+    from crankfmu.system.wiring import algebraic_loops, check_links
     scene = load_scene(SCENARIOS / "servo_press.toml")
     fmus = load_fmus(scene, fmu_dir, LogCollector())
     try:

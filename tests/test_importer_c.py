@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 from fmpy import extract, read_model_description
 
-from crankfmu.physics.catalog import FMU_MODELS
+from crankfmu.models.catalog import FMU_MODELS
 from importer_support import build_catalog, real_outputs, step_in_process
 
 HOST_SOURCE = Path(__file__).resolve().parent / "c_host" / "host.c"
@@ -145,7 +145,7 @@ def test_servo_press_pair_wired_by_the_c_host_matches_crankfmu_jacobi(host, cata
     """The host wires DcServoMotor and StephensonPress itself (Jacobi, 1 ms, the scene's
     parameters, effects, inputs and connections) and must agree with crankfmu's Jacobi master."""
     from crankfmu.cosim.runner import RunOptions, run_scene
-    from crankfmu.scenario import load_scene
+    from crankfmu.system.load import load_scene
 
     scene = load_scene(SCENARIOS / "servo_press.toml")
     scene.master.algorithm = "jacobi"

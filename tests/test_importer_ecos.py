@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from crankfmu.cosim.runner import RunOptions, run_scene
-from crankfmu.physics.catalog import FMU_MODELS
+from crankfmu.models.catalog import FMU_MODELS
 
 from importer_support import require_ecospy
 
@@ -157,7 +157,7 @@ def _unconnected_ssp(fmus: dict, path):
 def test_every_fmu_runs_in_the_native_ecos_cli_as_in_fmpy(catalog_fmus, ecos_cli, tmp_path):
     """All catalog FMUs, unconnected, in one native ecos run (one Python start): each on its
     start values, compared with fmpy stepping the same FMU alone in this process."""
-    from crankfmu.cosim.fmu import FmuInstance  # noqa: F401 (the exit-order fix in this process)
+    from crankfmu.fmu.instance import FmuInstance  # noqa: F401 (the exit-order fix in this process)
     from importer_support import step_in_process
     fmus = {model: catalog_fmus / f"{model}.fmu" for model in FMU_MODELS}
     got = run_ecos_cli(ecos_cli, _unconnected_ssp(fmus, tmp_path / "catalog.ssp"), NATIVE_STOP,
@@ -180,7 +180,7 @@ def test_servo_press_ssp_in_the_native_ecos_cli_equals_crankfmu_jacobi(jacobi_sc
                                                                        ecos_cli, tmp_path):
     """`crankfmu export-ssp` of the servo press, run by the native ecos as a two-FMU system
     (ecos's own Jacobi master): crankfmu's Jacobi numbers to the 6 printed decimals."""
-    from crankfmu.ssp import export_ssp
+    from crankfmu.system.ssp_export import export_ssp
     rec = run_scene(jacobi_scene, RunOptions(out=tmp_path / "jacobi.csv", fmu_dir=fmu_dir,
                                              progress=False)).recorder
     ssp = export_ssp(jacobi_scene, tmp_path / "servo_press.ssp", fmu_dir)

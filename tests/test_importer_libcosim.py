@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from crankfmu.cosim.runner import RunOptions, run_scene
-from crankfmu.physics.base import SCIPY_SOLVER
-from crankfmu.physics.catalog import FMU_MODELS
-from crankfmu.scenario.scene import SceneError
+from crankfmu.runtime.model import SCIPY_SOLVER
+from crankfmu.models.catalog import FMU_MODELS
+from crankfmu.system.scene import SceneError
 
 pytest.importorskip("libcosimpy")
 from crankfmu.interop import libcosim  # noqa: E402
@@ -90,7 +90,7 @@ def test_a_scene_asking_for_another_fmu_tolerance_is_refused(jacobi_scene, fmu_d
 
 def test_a_time_table_input_is_refused_with_its_key(jacobi_scene, fmu_dir):
     """The adapters set constant inputs only; a table would silently become its first value."""
-    from crankfmu.scenario.scene import InputSignal
+    from crankfmu.system.scene import InputSignal
     saved = dict(jacobi_scene.inputs)
     jacobi_scene.inputs["motor.u"] = InputSignal("motor.u", [0.0, 0.1], [0.0, 220.0])
     try:

@@ -1,4 +1,4 @@
-"""The native launcher in front of pythonfmu's binary (crankfmu/fmi/launcher): what the FMU
+"""The native launcher in front of pythonfmu's binary (crankfmu/fmu/launcher): what the FMU
 carries, and how it fails, seen from fmpy. Hosts without Python: tests/test_importer_c.py (the
 bare C host) and tests/test_importer_ecos.py (the native ecos command line)."""
 from __future__ import annotations
@@ -103,8 +103,8 @@ def test_fmpy_in_an_environment_without_scipy_names_scipy(fmu_dir, no_scipy_env)
 
 def test_without_a_c_compiler_the_build_keeps_pythonfmus_binary_and_says_so(
         tmp_path, monkeypatch, capsys):
-    from crankfmu.fmi import launcher
-    from crankfmu.fmi.build import build_fmu, validate
+    from crankfmu.fmu import launcher
+    from crankfmu.fmu.build import build_fmu, validate
 
     monkeypatch.setenv("CC", str(tmp_path / "no-such-cc"))
     monkeypatch.setattr(launcher, "_WARNED", [])
@@ -122,7 +122,7 @@ def test_without_a_c_compiler_the_build_keeps_pythonfmus_binary_and_says_so(
 
 
 def test_launcher_compile_is_deterministic():
-    from crankfmu.fmi import launcher
+    from crankfmu.fmu import launcher
 
     if launcher.find_compiler() is None:
         pytest.skip("no C compiler")

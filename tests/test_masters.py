@@ -26,8 +26,8 @@ from scipy.linalg import expm
 
 from crankfmu.cosim import runner
 from crankfmu.cosim.runner import RunError, RunOptions, run_scene
-from crankfmu.scenario import load_scene
-from crankfmu.scenario.scene import SceneError
+from crankfmu.system.load import load_scene
+from crankfmu.system.scene import SceneError
 
 OSCILLATOR = dict(J1=1.0, c1=10.0, d1=0.0, J2=0.5, k=100.0, ds=0.5, c2=0.0, d2=0.0, w10=2.0)
 STEPS = (1e-2, 5e-3, 2.5e-3)  # s; the record grid 1e-2 s is common to all three
@@ -35,7 +35,7 @@ STEPS = (1e-2, 5e-3, 2.5e-3)  # s; the record grid 1e-2 s is common to all three
 
 @pytest.fixture(scope="session")
 def rotor_fmus(tmp_path_factory):
-    from crankfmu.fmi.build import build_all
+    from crankfmu.fmu.build import build_all
 
     dest = tmp_path_factory.mktemp("rotor_fmus")
     build_all(dest, ["Rotor", "ShaftRotor"])

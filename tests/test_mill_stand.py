@@ -22,9 +22,9 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from crankfmu.physics.base import ParameterError, held
-from crankfmu.physics.mill_stand import (MillStandDrive, Q_RANK_FREE_SKEW, Q_RANK_GUIDED,
-                                         Q_SEED, W_SEED)
+from crankfmu.runtime.model import ParameterError, held
+from crankfmu.models.mill_stand.mill_stand import (MillStandDrive, Q_RANK_FREE_SKEW, Q_RANK_GUIDED,
+                                                   Q_SEED, W_SEED)
 
 PHIS = np.linspace(0.0, 2 * math.pi, 361)
 
@@ -218,7 +218,7 @@ def test_energy_balance_over_a_revolution_with_friction_and_load():
 
 # -- the structure table -----------------------------------------------------------------------
 def test_variant_table_matches_the_structure_analysis():
-    from crankfmu.structure import analyse, load_mechanism
+    from crankfmu.studies.structure import analyse, load_mechanism
     mech = Path(__file__).resolve().parents[1] / "scenarios" / "mechanisms"
     for v, name in enumerate(("p1", "p2p3", "p4")):
         coax = analyse(load_mechanism(mech / f"stand_drive_{name}_coaxial.toml"))

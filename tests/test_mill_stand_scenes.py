@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from crankfmu.cosim.runner import RunOptions, run_scene
-from crankfmu.scenario import load_scene
+from crankfmu.system.load import load_scene
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 SCENES = {"all revolute (p1)": "mill_stand.toml", "p3 at A, H, p2 at C, F": "mill_stand_p2p3.toml",
@@ -22,7 +22,7 @@ TWO_PI = 2.0 * math.pi
 
 @pytest.fixture(scope="module")
 def fmus(tmp_path_factory) -> Path:
-    from crankfmu.fmi.build import build_all
+    from crankfmu.fmu.build import build_all
 
     dest = tmp_path_factory.mktemp("mill_fmus")
     build_all(dest, ["DcServoMotor", "MillStandDrive"])

@@ -1,7 +1,8 @@
 """Python FMUs sharing one process: instances of one FMU, and FMUs from different builds.
 
 All pythonfmu FMUs in a process share one interpreter and one sys.modules. crankfmu bundles its
-runtime as `crankfmu_rt_<digest>` (digest = hash of the runtime sources, the build id), so
+runtime and model folder as `crankfmu_rt_<digest>` (digest = hash of those sources, the build
+id), so
 - two instances of one FMU share code but no state: each gives what it gives alone;
 - FMUs of two builds load two runtime packages: each runs its own build's code. Build B here is
   built from a copy of the sources with one behavioural change (DcServoMotor's flange_J output
@@ -19,8 +20,8 @@ import numpy as np
 import pytest
 from fmpy import read_model_description
 
-from crankfmu.fmi import build
-from crankfmu.physics.catalog import FMU_MODELS
+from crankfmu.fmu import build
+from crankfmu.models.catalog import FMU_MODELS
 from importer_support import build_catalog, step_in_process, step_together
 
 TESTS = Path(__file__).resolve().parent
@@ -52,12 +53,12 @@ def build_from_copy(tmp: Path, dest: Path, build_id: str | None = None) -> Path:
     (the control case); by default it is the copy's own digest."""
     package = tmp / "src" / "crankfmu"
     shutil.copytree(build.PACKAGE_DIR, package, ignore=shutil.ignore_patterns("__pycache__"))
-    with open(package / "physics" / "dc_motor.py", "a") as f:
+    with open(package / "models" / "dc_motor" / "dc_motor.py", "a") as f:
         f.write(MARKER)
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(build, "PACKAGE_DIR", package)
-        digest = build_id or build.sources_digest(build.runtime_files())  # the copy's own id
-        mp.setattr(build, "current_build_id", lambda: digest)  # the cached real id stays intact
+        digest = build_id or build.sources_digest(build.runtime_files("DcServoMotor"))  # the copy's own id
+        mp.setattr(build, "current_build_id", lambda model: digest)  # the cached real id stays intact
         return build.build_fmu("DcServoMotor", dest)
 
 
@@ -114,7 +115,7 @@ def two_builds(catalog, tmp_path_factory) -> tuple[Path, Path]:
 
 def test_builds_differ_in_id_and_guid(two_builds):
     a, b = (read_model_description(str(p)) for p in two_builds)
-    assert a.version == build.current_build_id()
+    assert a.version == build.current_build_id("DcServoMotor")
     assert b.version != a.version and b.guid != a.guid
 
 

@@ -35,9 +35,9 @@ import numpy as np
 import pytest
 
 import planetary_reference as R
-from crankfmu.physics.base import ParameterError, held
-from crankfmu.physics.induction_motor import InductionMotor
-from crankfmu.physics.planetary_drive import PlanetaryClutchDrive, steady_state
+from crankfmu.runtime.model import ParameterError, held
+from crankfmu.models.induction_motor.induction_motor import InductionMotor
+from crankfmu.models.planetary_drive.planetary_drive import PlanetaryClutchDrive, steady_state
 
 T_END = 0.4   # s: engagement and stopping end near 0.17 s; the rest checks the held phase
 H = 1e-3      # s: communication step

@@ -29,9 +29,9 @@ import pytest
 import planetary_reference as R
 from conftest import SCENARIOS
 from crankfmu.cosim.runner import RunOptions, run_scene
-from crankfmu.physics.induction_motor import InductionMotor
-from crankfmu.physics.planetary_drive import PlanetaryClutchDrive, steady_state
-from crankfmu.scenario import load_scene
+from crankfmu.models.induction_motor.induction_motor import InductionMotor
+from crankfmu.models.planetary_drive.planetary_drive import PlanetaryClutchDrive, steady_state
+from crankfmu.system.load import load_scene
 
 STOP = 0.3  # s: both locks happen before 0.24 s; the rest checks the held phase
 TIME_TOL, ENERGY_TOL, BALANCE_TOL = 1e-4, 1e-3, 1e-6
@@ -44,7 +44,7 @@ SCENES = {"engage": "planetary_engagement.toml", "stop": "planetary_stopping.tom
 
 @pytest.fixture(scope="module")
 def fmus(tmp_path_factory):
-    from crankfmu.fmi.build import build_all
+    from crankfmu.fmu.build import build_all
     dest = tmp_path_factory.mktemp("planetary_fmus")
     build_all(dest, ["InductionMotor", "PlanetaryClutchDrive"])
     return dest

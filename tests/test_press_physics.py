@@ -21,10 +21,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from servo_press_monolithic import (  # noqa: E402
     SERVO_MOTOR, SERVO_PRESS, SERVO_U, TWO_PI, MonolithicServoPress)
 
-from crankfmu.physics import press_analysis as pa  # noqa: E402
-from crankfmu.physics.base import ParameterError, held  # noqa: E402
-from crankfmu.physics.dc_motor import DcServoMotor  # noqa: E402
-from crankfmu.physics.stephenson_press import G_STANDARD, StephensonPress  # noqa: E402
+from crankfmu.studies import press_analysis as pa  # noqa: E402
+from crankfmu.runtime.model import ParameterError, held  # noqa: E402
+from crankfmu.models.dc_motor.dc_motor import DcServoMotor  # noqa: E402
+from crankfmu.models.stephenson_press.stephenson_press import G_STANDARD, StephensonPress  # noqa: E402
 
 LAG = {False: (), True: ("electrical_lag",)}
 

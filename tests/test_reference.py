@@ -14,8 +14,8 @@ import pytest
 from scipy.linalg import expm
 
 from crankfmu.reference import ComposedModel, CompositionError, record_times, solve_reference
-from crankfmu.scenario import load_scene
-from crankfmu.scenario.scene import SceneError, parse_scene
+from crankfmu.system.load import load_scene
+from crankfmu.system.scene import SceneError, parse_scene
 
 from servo_press_monolithic import MonolithicServoPress
 

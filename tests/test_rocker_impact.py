@@ -16,11 +16,12 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.optimize import minimize_scalar
 
-from crankfmu.physics.base import ParameterError, held
-from crankfmu.physics.rocker_analysis import (
-    K_N_VALUES, RockerData, cascade_matrix, coefficients, exact_linear, first_approximation,
-    format_impact_table, impact_table, linearise, second_approximation, validity)
-from crankfmu.physics.rocker_impact import RockerImpact
+from crankfmu.runtime.model import ParameterError, held
+from crankfmu.studies.rocker_analysis import (K_N_VALUES, RockerData, cascade_matrix, coefficients,
+                                              exact_linear, first_approximation,
+                                              format_impact_table, impact_table, linearise,
+                                              second_approximation, validity)
+from crankfmu.models.rocker_impact.rocker_impact import RockerImpact
 
 RTOL = 1e-10                 # model's internal relative tolerance in these tests
 MO100 = RockerData()         # J, m, r, R_c, d, V0, E, rho, nu of the seed; S = 1.1 J/(m r)
@@ -446,7 +447,7 @@ def test_second_approximation_matches_validity_estimate(table):
 def test_claims_verdicts(table):
     """`crankfmu analyze impact` states per reading which claims hold: the issue's tau bound of
     the first approximation holds for S = 1.1 J/(m r) and fails for 0.9 (rows measured above)."""
-    from crankfmu.physics.rocker_analysis import claims, format_claims
+    from crankfmu.studies.rocker_analysis import claims, format_claims
     items = claims(list(table.values()))
     verdict = {(c.S_factor, c.text): c.holds for c in items}
     tau = "1st approx. vs exact: contact duration tau within 1 %"

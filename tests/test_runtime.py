@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from crankfmu.physics import dopri
-from crankfmu.physics.base import InputPolynomial, IntegrationError, held
-from crankfmu.physics.catalog import FMU_MODELS, make_physics, physics_class
-from crankfmu.physics.closed_form import lag_step, phi_functions
-from crankfmu.physics.dc_motor import DcServoMotor
+from crankfmu.runtime import dopri
+from crankfmu.runtime.model import InputPolynomial, IntegrationError, held
+from crankfmu.models.catalog import FMU_MODELS, make_physics, physics_class
+from crankfmu.runtime.closed_form import lag_step, phi_functions
+from crankfmu.models.dc_motor.dc_motor import DcServoMotor
 
 
 def pendulum(t, y):
@@ -242,11 +242,11 @@ def test_a_step_has_one_work_limit_over_its_event_restarts():
     (lambda x: math.exp(x) - 1e5, 0.0, 20.0),
 ])
 def test_brent_as_scipy(f, a, b):
-    """The runtime's Brent (physics/roots.py, so FMUs need not import scipy.optimize) finds the
+    """The runtime's Brent (runtime/roots.py, so FMUs need not import scipy.optimize) finds the
     root scipy.optimize.brentq finds, to the tolerance both were given, in as many calls."""
     from scipy.optimize import brentq as scipy_brentq
 
-    from crankfmu.physics.roots import brentq
+    from crankfmu.runtime.roots import brentq
     calls = [0, 0]
 
     def counted(k):

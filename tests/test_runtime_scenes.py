@@ -25,8 +25,8 @@ import numpy as np
 import pytest
 
 from crankfmu.cosim.runner import RunOptions, run_scene
-from crankfmu.physics.base import SCIPY_SOLVER
-from crankfmu.scenario import load_scene
+from crankfmu.runtime.model import SCIPY_SOLVER
+from crankfmu.system.load import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 STOP = {"servo_press": 0.4, "conventional_press": 1.0, "hammer": 0.4, "hammer_bearings": 0.4,

@@ -4,8 +4,9 @@ from __future__ import annotations
 import pytest
 
 from crankfmu.cosim.runner import RunOptions, run_scene
-from crankfmu.scenario import SceneError, load_scene
-from crankfmu.scenario.scene import apply_overrides
+from crankfmu.system.scene import SceneError
+from crankfmu.system.load import load_scene
+from crankfmu.system.scene import apply_overrides
 
 from conftest import SCENARIOS
 

@@ -24,8 +24,8 @@ import numpy as np
 import pytest
 
 from crankfmu.cosim.runner import RunOptions, run_scene
-from crankfmu.scenario import load_scene
-from crankfmu.scenario.scene import apply_overrides
+from crankfmu.system.load import load_scene
+from crankfmu.system.scene import apply_overrides
 
 from conftest import SCENARIOS
 

@@ -14,10 +14,12 @@ import pytest
 from lxml import etree
 
 from crankfmu.cosim.runner import RunOptions, run_scene
-from crankfmu.scenario import SceneError, load_scene
-from crankfmu.scenario.scene import InputSignal
-from crankfmu.ssp import export_ssp, fmpy_parameter_set, load_ssp
-from crankfmu.ssp.export import NS, SSD_NAME
+from crankfmu.system.scene import SceneError
+from crankfmu.system.load import load_scene
+from crankfmu.system.scene import InputSignal
+from crankfmu.system.ssp_export import export_ssp, fmpy_parameter_set
+from crankfmu.system.ssp_load import load_ssp
+from crankfmu.system.ssp_export import NS, SSD_NAME
 
 from conftest import SCENARIOS
 

@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from crankfmu.structure import (MechanismError, analyse, load_mechanism, loads_mechanism, main,
-                                mechanism_from_dict, structure_report)
+from crankfmu.studies.structure import (MechanismError, analyse, load_mechanism, loads_mechanism,
+                                        main, mechanism_from_dict, structure_report)
 
 MECH = Path(__file__).resolve().parents[1] / "scenarios" / "mechanisms"
 

@@ -27,7 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 @pytest.fixture(scope="module")
 def rotor_fmu_dir(tmp_path_factory):
-    from crankfmu.fmi.build import build_all
+    from crankfmu.fmu.build import build_all
 
     dest = tmp_path_factory.mktemp("sweep_fmus")
     build_all(dest, ["Rotor"])
@@ -250,7 +250,7 @@ def test_cli_on_a_scheduler_address(tmp_path, rotor_fmu_dir, cluster, capsys):
 
 @pytest.fixture(scope="module")
 def hybrid_fmus(tmp_path_factory):
-    from crankfmu.fmi.build import build_all
+    from crankfmu.fmu.build import build_all
     dest = tmp_path_factory.mktemp("hybrid_fmus")
     build_all(dest, ["DcServoMotor", "StephensonPress", "InductionMotor", "PlanetaryClutchDrive"])
     return dest
@@ -298,7 +298,7 @@ def kill_me(names, rows, status, victim, key):
 
 
 def _tasks(tmp_path, victim):
-    from crankfmu.scenario import load_scene
+    from crankfmu.system.load import load_scene
     from crankfmu.studies.executor import RunTask
     scene = load_scene(spinner(tmp_path, stop=0.5))
     return [RunTask(k, scene, post=kill_me, post_args={"victim": victim, "key": k})

@@ -38,8 +38,8 @@ def test_the_regex_itself():
 
 
 def test_units_in_the_fmus():
-    from crankfmu.physics.catalog import FMU_MODELS, physics_class
-    from crankfmu.slaves.base import variable_table
+    from crankfmu.models.catalog import FMU_MODELS, physics_class
+    from crankfmu.runtime.slave import variable_table
     units = [v.unit for m in FMU_MODELS for v in variable_table(physics_class(m)) if v.unit]
     assert len(units) > 100 and bad_units(units) == []
 
@@ -47,7 +47,7 @@ def test_units_in_the_fmus():
 def test_units_in_sidecars_plots_and_terminal_output(tmp_path, fmu_dir):
     import crankfmu
     from crankfmu.commands.analyze import hammer_figure
-    from crankfmu.compare import Series, format_table, compare_table, overlay_figure
+    from crankfmu.studies.compare import Series, format_table, compare_table, overlay_figure
 
     run = crankfmu.simulate(SCENARIOS / "servo_press.toml", stop_time=0.05,
                             out=tmp_path / "run.csv", fmu_dir=fmu_dir)

@@ -1,4 +1,4 @@
-"""BaseUnit exponents are derived from the unit string (fmi/units.py), for every unit any FMU
+"""BaseUnit exponents are derived from the unit string (fmu/units.py), for every unit any FMU
 uses: checked on the modelDescription each FMU gets, without building the FMUs."""
 from __future__ import annotations
 
@@ -8,10 +8,10 @@ from xml.etree.ElementTree import fromstring
 
 import pytest
 
-from crankfmu.fmi.model_description import model_description
-from crankfmu.fmi.units import UnitError, base_unit_attributes, parse_unit
-from crankfmu.physics.catalog import FMU_MODELS, physics_class
-from crankfmu.slaves.base import ModelSlave
+from crankfmu.fmu.model_description import model_description
+from crankfmu.fmu.units import UnitError, base_unit_attributes, parse_unit
+from crankfmu.models.catalog import FMU_MODELS, physics_class
+from crankfmu.runtime.slave import ModelSlave
 
 
 def _description(model: str):

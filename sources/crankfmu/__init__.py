@@ -5,12 +5,12 @@ simulate, reference, accuracy, compare, sweep, load_scene and Result."""
 import sys as _sys
 import types as _types
 
-__version__ = "0.1.0"
+from .version import __version__  # noqa: F401
 
 __all__ = ["Result", "accuracy", "compare", "load_scene", "reference", "simulate", "sweep"]
-# Functions named like a subpackage or module of crankfmu (crankfmu/reference/, accuracy/,
+# Functions named like a subpackage or module of crankfmu (crankfmu/reference/, studies/accuracy/,
 # compare.py): importing that submodule must not replace the function on the package
-_SHADOWED = ("reference", "accuracy", "compare")
+_SHADOWED = ("reference",)  # the function crankfmu.reference over the subpackage
 
 
 def sweep(scene, vary, out=None, **options):

@@ -106,8 +106,8 @@ def _result(recorder, metadata: dict, files: dict, title: str, statistics=None,
 
 
 def load_scene(scene):
-    """A scene file (.toml or .ssp) loaded and checked (crankfmu.scenario.load_scene)."""
-    from .scenario.scene import load_scene as _load
+    """A scene file (.toml or .ssp) loaded and checked (crankfmu.system.load_scene)."""
+    from .system.load import load_scene as _load
     return _load(scene)
 
 
@@ -116,8 +116,7 @@ def prepare(scene, *, stop_time=None, step=None, algorithm=None, extrapolation=N
     """A copy of `scene` (or the scene loaded from that path) with the settings applied and
     checked as a scene file's would be."""
     from .errors import MAX_TIME
-    from .scenario.scene import (Scene, SceneError, _number, check_run_size, set_input,
-                                 set_value)
+    from .system.scene import Scene, SceneError, _number, check_run_size, set_input, set_value
     scene = copy.deepcopy(scene) if isinstance(scene, Scene) else load_scene(scene)
     for ref, value in (parameters or {}).items():
         set_value(scene, ref, value, f"parameters[{ref!r}]")
@@ -177,12 +176,12 @@ def reference(scene, *, stop_time=None, parameters=None, inputs=None, rtol=None,
 
 def accuracy(scene, *, out=None, stop_time=None, parameters=None, inputs=None, **options):
     """Error against the monolithic reference and wall time per master setting
-    (crankfmu.accuracy.run_accuracy; `options` are AccuracyOptions' fields: algorithms,
+    (crankfmu.studies.accuracy.run_accuracy; `options` are AccuracyOptions' fields: algorithms,
     extrapolations, steps, tolerances, fmu_tolerances, metric, variables, cycles, target,
     reference_rtol, fmu_dir, progress, jobs, scheduler, executor). `out`: the folder to write
     (accuracy.csv, work_precision.png, the runs); without it they go to a temporary folder
     that is removed, and the result's paths are None."""
-    from .accuracy import AccuracyOptions, run_accuracy
+    from .studies.accuracy import AccuracyOptions, run_accuracy
     scene = prepare(scene, stop_time=stop_time, parameters=parameters, inputs=inputs)
     options.setdefault("progress", False)
     if out is not None:
@@ -196,12 +195,12 @@ def accuracy(scene, *, out=None, stop_time=None, parameters=None, inputs=None, *
 def compare(scene_a, scene_b, *, stop_time=None, out=None, fmu_dir=None, jobs=1,
             scheduler=None, progress=False) -> dict:
     """Run two scenes (e.g. a component swap) and compare cycle time, speeds, delta, peak
-    torques and energy per stroke (crankfmu.compare). Returns a dict: "rows" (metric, unit, A,
+    torques and energy per stroke (crankfmu.studies.compare). Returns a dict: "rows" (metric, unit, A,
     B, B - A, relative), "text" (the table), "a" and "b" (the role series); with `out`, the
     folder written (compare.csv, compare.png, both runs' CSVs) and "csv", "png" in it."""
     import contextlib
 
-    from .compare import compare_scenes
+    from .studies.compare import compare_scenes
     from .cosim.runner import RunOptions
     from .studies.executor import make_executor
     scenes = [prepare(s, stop_time=stop_time) for s in (scene_a, scene_b)]

@@ -7,7 +7,7 @@ import pkgutil
 import sys
 from pathlib import Path
 
-from . import __version__
+from .version import __version__
 
 
 # -- shared options: one helper per family; each command takes the families that mean something
@@ -76,8 +76,8 @@ def load_with_options(args):
     """The scene with command-line overrides applied (shared by run-like commands); every value
     is checked as the same key in a scene file would be."""
     from .errors import MAX_TIME
-    from .scenario.scene import (SceneError, _integer, _number, apply_overrides, check_run_size,
-                                 load_scene)
+    from .system.load import load_scene
+    from .system.scene import SceneError, _integer, _number, apply_overrides, check_run_size
 
     scene = load_scene(args.scene)
     apply_overrides(scene, args.overrides)
@@ -135,11 +135,11 @@ def cmd_run(args) -> int:
 def cmd_build(args) -> int:
     import logging
 
-    from .fmi.build import PACKAGE_DIR, build_all
+    from .fmu.build import PACKAGE_DIR, build_all
 
     logging.getLogger("crankfmu").info("building FMUs from the crankfmu sources at %s",
                                        PACKAGE_DIR)
-    from .cosim.wiring import warn_if_tree_differs
+    from .system.wiring import warn_if_tree_differs
     warn_if_tree_differs(Path.cwd())
     build_all(args.dest, args.models or None)
     return 0
@@ -205,7 +205,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_run_options(run)
     run.set_defaults(func=cmd_run)
     build = sub.add_parser("build", help="build every FMU into fmus/ and validate it")
-    from .fmi.build import add_arguments
+    from .fmu.build import add_arguments
     add_arguments(build)
     build.set_defaults(func=cmd_build)
     from . import commands

@@ -8,7 +8,7 @@ interrupted run (`RunInterrupted`, Ctrl-C) to 130: no traceback for anything a u
 """
 from __future__ import annotations
 
-from .physics.base import CrankfmuError  # noqa: F401 - defined with the physics (bottom layer)
+from .runtime.model import CrankfmuError  # noqa: F401 - defined with the physics (bottom layer)
 
 # Limits on what a scene may ask for; each is named in the error that enforces it.
 MAX_STEPS = 10_000_000          # communication steps of one run ([master].max_steps raises it)
@@ -22,3 +22,11 @@ class InterruptedRun(CrankfmuError):
     """Base of a run stopped by the user (Ctrl-C): exit status 130."""
 
     exit_status = 130
+
+
+class SceneError(CrankfmuError, ValueError):
+    """A scene file problem; the message names the file and the key."""
+
+    def __init__(self, path, key: str, message: str):
+        self.path, self.key = path, key
+        super().__init__(f"{path}: {key}: {message}")

@@ -14,7 +14,7 @@ def single_scene(model: str, outputs: list[str], stop: float = 0.01) -> bytes:
 def override_cases(fmu_dir, values=VALUES, models=None) -> list[dict]:
     from fmpy import read_model_description
 
-    from crankfmu.physics.catalog import FMU_MODELS
+    from crankfmu.models.catalog import FMU_MODELS
     cases = []
     for model in models or FMU_MODELS:
         md = read_model_description(str(fmu_dir / f"{model}.fmu"))

@@ -24,7 +24,7 @@ def _names(text: str) -> list[str]:
 
 
 def register(sub) -> None:
-    from ..accuracy import DEFAULT_STEP_FACTORS, DEFAULT_TARGET, DEFAULT_TOLERANCES, METRICS
+    from ..studies.accuracy import DEFAULT_STEP_FACTORS, DEFAULT_TARGET, DEFAULT_TOLERANCES, METRICS
     from ..cli import add_fmu_option, add_output_options, add_scene_options
 
     p = sub.add_parser("accuracy", help="error vs wall time of master settings against the "
@@ -63,7 +63,8 @@ def register(sub) -> None:
 
 
 def run_accuracy_command(args) -> int:
-    from ..accuracy import AccuracyOptions, MetricError, format_orders, format_table, run_accuracy
+    from ..studies.accuracy import (AccuracyOptions, MetricError, format_orders, format_table,
+                                    run_accuracy)
     from ..cli import load_with_options
     from ..reference import CompositionError
 

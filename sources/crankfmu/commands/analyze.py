@@ -39,7 +39,7 @@ def register(sub) -> None:
 
 
 def run_flywheel(args) -> int:
-    from ..scenario import load_scene
+    from ..system.load import load_scene
     from ..studies.flywheel import report
 
     print(report(args.csv, load_scene(args.scene), args.plot))
@@ -49,8 +49,8 @@ def run_flywheel(args) -> int:
 
 
 def run_impact(args) -> int:
-    from ..physics.rocker_analysis import (RockerData, claims, format_claims,
-                                           format_impact_table, impact_table)
+    from ..studies.rocker_analysis import (RockerData, claims, format_claims, format_impact_table,
+                                           impact_table)
 
     changes = {k: getattr(args, k) for k in ("J", "m", "r", "R_c", "d", "E", "rho", "nu", "V0")
                if getattr(args, k) is not None}

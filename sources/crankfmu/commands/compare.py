@@ -1,5 +1,5 @@
 """`crankfmu compare A.toml B.toml [--out DIR]`: run two scenes (a component swap) and report the
-differences that matter (sources/crankfmu/compare.py): table printed and in DIR/compare.csv,
+differences that matter (sources/crankfmu/studies/compare.py): table printed and in DIR/compare.csv,
 overlay plot DIR/compare.png, both runs' CSVs in DIR."""
 from __future__ import annotations
 
@@ -22,9 +22,10 @@ def register(sub) -> None:
 
 
 def run_compare(args) -> int:
-    from ..compare import compare_scenes
+    from ..studies.compare import compare_scenes
     from ..cosim.runner import RunOptions
-    from ..scenario.scene import SceneError, load_scene
+    from ..system.load import load_scene
+    from ..system.scene import SceneError
 
     scenes = [load_scene(args.scene_a), load_scene(args.scene_b)]
     for sc in scenes:

@@ -20,8 +20,8 @@ def register(sub) -> None:
 
 def run_export(args) -> int:
     from ..cli import load_with_options
-    from ..cosim.wiring import default_fmu_dir
-    from ..ssp.export import describe_fmus, export_ssp, lossy_parts
+    from ..system.wiring import default_fmu_dir
+    from ..system.ssp_export import describe_fmus, export_ssp, lossy_parts
 
     scene = load_with_options(args)
     out = args.out or Path("results") / f"{scene.name}.ssp"

@@ -13,6 +13,6 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..structure.report import main
+    from ..studies.structure.report import main
 
     return main([str(args.mechanism)] + (["--json"] if args.json else []))

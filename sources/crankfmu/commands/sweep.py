@@ -51,7 +51,7 @@ def run_sweep(args) -> int:
 
     from ..studies.sweep import SweepError, sweep
 
-    from ..scenario.scene import load_scene
+    from ..system.load import load_scene
 
     out = args.out
     if out is None:

@@ -13,13 +13,13 @@ from fmpy.fmi1 import FMICallException
 from lxml import etree
 
 from ..errors import CrankfmuError, InterruptedRun
-from ..scenario.scene import Scene, SceneError, check_run_size
-from .fmu import FmuInstance, LogCollector
+from ..system.scene import Scene, SceneError, check_run_size
+from ..fmu.instance import FmuInstance, LogCollector
 from .masters import DivergenceError, make_master
 from .results import (Recorder, column_units, normalize_unit, plot, versions, write_csv,
                       write_sidecar)
-from .wiring import (System, check_components, check_links, check_loops, check_physics,
-                     default_fmu_dir, resolve_fmu)
+from ..system.wiring import (System, check_components, check_links, check_loops, check_physics,
+                             default_fmu_dir, resolve_fmu)
 
 
 class RunError(CrankfmuError, RuntimeError):
@@ -257,7 +257,7 @@ def _run(scene, options, out, log, fmus, system, master, recorder, readers, inte
 def plot_roles(scene: Scene) -> dict | None:
     """The scene's [analysis] roles (crank angle, speed, torques) for the steady-state plot;
     None without a complete [analysis] table."""
-    from ..compare import analysis_roles
+    from ..studies.compare import analysis_roles
     try:
         return analysis_roles(scene) if "analysis" in scene.raw else None
     except SceneError:

@@ -23,8 +23,8 @@ from types import SimpleNamespace
 import numpy as np
 from fmpy import read_model_description
 
-from ..cosim.wiring import check_components, check_links, resolve_fmu
-from ..scenario.scene import Scene, SceneError
+from ..system.wiring import check_components, check_links, resolve_fmu
+from ..system.scene import Scene, SceneError
 
 
 @dataclass
@@ -140,8 +140,8 @@ def _check_parameters(scene: Scene, descs: dict) -> None:
     inside libcosim an FMU's failed initialization kills the whole process (measured: libcosim
     aborts on an uncaught C++ exception, for fmi2Fatal and for the launcher's fmi2Error alike),
     and ecos used to segfault on it (now it runs on with a failed instance)."""
-    from ..physics.base import ParameterError
-    from ..physics.catalog import FMU_MODELS, make_physics
+    from ..runtime.model import ParameterError
+    from ..models.catalog import FMU_MODELS, make_physics
     for name, comp in scene.components.items():
         model = descs[name].model_description.modelName
         if model not in FMU_MODELS:

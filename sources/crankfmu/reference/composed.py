@@ -31,9 +31,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..physics.base import PhysicsModel
-from ..physics.catalog import FMU_MODELS, make_physics, physics_class
-from ..scenario.scene import Scene, SceneError
+from ..runtime.model import PhysicsModel
+from ..models.catalog import FMU_MODELS, make_physics, physics_class
+from ..system.scene import Scene, SceneError
 
 
 # Classes whose advance() only integrates their own derivatives() more cheaply (the linear

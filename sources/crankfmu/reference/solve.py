@@ -16,7 +16,7 @@ import numpy as np
 
 from ..cosim.results import (Recorder, column_units, normalize_unit, versions, write_csv,
                              write_sidecar)
-from ..scenario.scene import Scene, SceneError
+from ..system.scene import Scene, SceneError
 from .composed import ComposedModel
 
 DEFAULT_RTOL = 1e-10

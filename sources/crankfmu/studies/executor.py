@@ -105,7 +105,7 @@ def file_digest(path: Path) -> str:
 def prepare_tasks(tasks: list[RunTask], fmu_dir: Path | None) -> dict[str, Path]:
     """Resolve (and build, once, in the parent) every FMU the tasks need; fill task.fmus.
     Returns digest -> path of the parent's file."""
-    from ..cosim.wiring import default_fmu_dir, resolve_fmu
+    from ..system.wiring import default_fmu_dir, resolve_fmu
 
     files: dict[str, Path] = {}
     resolved: dict[tuple, Path] = {}

@@ -1,5 +1,5 @@
 """The servo press's non-uniformity against the flywheel, from a sweep, with the paper's
-analysis beside it (crankfmu.physics.press_analysis; nothing here re-derives it):
+analysis beside it (crankfmu.studies.press_analysis; nothing here re-derives it):
 
     delta_1(J_f)   first approximation of delta (eq. 18-20, with the armature lag eq. 32-35 when
                    the scene's motor has the effect electrical_lag)
@@ -24,9 +24,9 @@ PARAMETER = "motor.J_flywheel"
 
 def analytic(scene, J_f: np.ndarray, motor: str = "motor", press: str = "press") -> dict:
     """delta_1, sqrt(26) on J_f [kg m^2, motor shaft], and J_Mx of (28) on the motor shaft."""
-    from ..physics import press_analysis as pa
-    from ..physics.dc_motor import DcServoMotor
-    from ..physics.stephenson_press import StephensonPress
+    from . import press_analysis as pa
+    from ..models.dc_motor.dc_motor import DcServoMotor
+    from ..models.stephenson_press.stephenson_press import StephensonPress
 
     p, m = scene.components[press], scene.components[motor]
     u0 = scene.inputs[f"{motor}.u"].values[0]

@@ -10,7 +10,7 @@ parameter's range (START:STOP, or the min and max of a value list), scipy.stats.
 
 Each run executes through one executor (local process pool, or a Dask cluster:
 crankfmu.studies.executor); in the worker, its figures are computed from the scene's
-[analysis] table with crankfmu.compare's metric code: strokes, cycle time, mean crank speed,
+[analysis] table with crankfmu.studies.compare's metric code: strokes, cycle time, mean crank speed,
 delta, energy per stroke, peak drive and load torque, and the [analysis].events variables at the
 run's end (hybrid scenes). DIR/sweep.csv holds one row per run: `run`, one column per varied
 parameter (named COMP.PARAM), the figures, `status` (completed, failed, refused, error, lost),
@@ -113,8 +113,8 @@ def expand(varies: list[Vary], samples: int | None = None, seed: int = 0) -> lis
 
 # -- the figures, computed in the worker -------------------------------------------------------------
 def sweep_figures(names, rows, status, roles) -> dict:
-    """A run's figures from its recorded arrays (crankfmu.compare's metrics)."""
-    from ..compare import metrics, series_from_arrays
+    """A run's figures from its recorded arrays (crankfmu.studies.compare's metrics)."""
+    from .compare import metrics, series_from_arrays
     if status != "completed" or rows is None or len(rows) < 2:
         return {}
     m = metrics(series_from_arrays("run", names, rows, roles))
@@ -213,8 +213,9 @@ def sweep(scene, vary, out, *, jobs: int | None = None, scheduler: str | None = 
     stop_time  end of every run [s]; from_time: start of the analysis window [s]
                ([analysis].from_time); overrides: "COMP.PARAM=V" fixed for every run
     """
-    from ..compare import analysis_roles, record_analysis_variables
-    from ..scenario.scene import Scene, SceneError, apply_overrides, load_scene
+    from .compare import analysis_roles, record_analysis_variables
+    from ..system.load import load_scene
+    from ..system.scene import Scene, SceneError, apply_overrides
     from .executor import RunTask, file_digest, make_executor
 
     if not isinstance(scene, Scene):
@@ -313,7 +314,7 @@ def _check_parameters(scene, parameters, fmus: dict, files: dict) -> None:
     """Fail before running anything when a varied parameter does not exist."""
     from fmpy import read_model_description
 
-    from ..scenario.scene import SceneError
+    from ..system.scene import SceneError
     for ref in parameters:
         comp, param = ref.split(".", 1)
         md = read_model_description(str(files[fmus[comp][0]]))
@@ -344,7 +345,7 @@ def _resume(out: Path, key: dict, columns: list[str], parameters: list[str]) -> 
 def plot_sweep(path: Path, table: SweepTable, title: str) -> Path:
     """Each figure (rows of panels) against each varied parameter (columns); failed runs are
     marked with a red x on the lower edge of their panels."""
-    from ..compare import UNITS
+    from .compare import UNITS
     from ..cosim.results import PALETTE, axis_label, new_figure
 
     figs, params = table.figures, table.parameters

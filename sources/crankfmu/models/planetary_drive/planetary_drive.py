@@ -1,0 +1,643 @@
+"""Planetary drive of a crank press with friction brakes on the ring and the carrier
+(seed planetary_drive_friction_clutch; MODELS.md section 3; docs/models/planetary_drive.md).
+
+Type-A planetary gear: sun a (driven by the motor through the `sun_*` port), internal ring b,
+carrier h (drives the press through the `flange_*` port). p = r_b/r_a = -i_ab^h, Willis:
+
+    w_a = -p w_b + (1+p) w_h
+
+Generalised coordinates v = (w_b, w_h); T = 1/2 (J_a w_a^2 + J_b w_b^2 + J_h w_h^2) with
+J_a := J_a + sun_J and J_h := J_h + flange_J; Lagrange (planets lumped into the carrier):
+
+    [J_a p^2 + J_b      -J_a p (1+p)     ] [w_b']   [ -p M_A + F_b            ]
+    [-J_a p (1+p)        J_a (1+p)^2 + J_h] [w_h'] = [ (1+p) M_A + tau_fl + F_h ]
+
+    M_A = sun_tau + F_a           (F_a = -M_ca while the sun turns forwards: MODELS.md's
+                                   M_A = M_motor - M_ca)
+    tau_fl = flange_tau           (external torque on the carrier from a coupled press)
+    F_k  = friction torque on element k, |F_k| <= C_k
+
+Three friction elements k, each with its speed w_k = G_k . v:
+    a  sun resistance           C_a = M_ca                 G_a = (-p, 1+p)
+    b  ring brake + resistance  C_b = M_tb(t) + M_cb       G_b = (1, 0)
+    h  carrier brake + resist.  C_h = M_th(t) + M_ch       G_h = (0, 1)
+  sliding (direction d = sgn w_k): F_k = -C_k d.
+  locked  (d = 0): a constraint on the ACCELERATION G_k . v' = 0 (w_k stays exactly 0.0 for
+          b and h; the sun's speed is reported as exactly 0.0); F_k is the constraint torque.
+  Possible lock sets: none, one element (1 DOF left), or all three (at rest: two locked
+  elements hold the third by Willis; the three friction torques are then statically
+  indeterminate, and the rest holds while an F_a exists with every |F_k| <= C_k).
+Mode changes (events, located by the integrator):
+  sliding -> w_k reaches 0: w_k := 0 exactly; lock if the torques allow, else it passes
+          through zero and slides the other way.
+  one locked -> F_k reaches -C_k (breaks free forwards) or +C_k (backwards).
+  all locked -> the feasible interval of F_a closes.
+  At every such event the new modes are the unique Coulomb solution: the acceleration
+  minimises the convex f(a) = 1/2 a.M.a - Q.a + sum_{k at rest} C_k |G_k.a| (Gauss's
+  principle with maximal dissipation), found by comparing f at its few candidate points.
+This is the Modelica.Mechanics.Rotational PartialFriction logic (locked = acceleration
+constraint, constant sliding friction) for three coupled elements, without its
+StartForward/StartBackward modes: a member that breaks free starts sliding at w = 0 with an
+acceleration of the breakaway sign. No chattering: a lock costs one event, a break-free one.
+
+Brake torque laws, t since the last command edge (t0), M0 the torque at the edge:
+  exponential (default)   engage  M = M_p - (M_p - M0) exp(-alpha t)   (= M_p (1 - e^-at), M0=0)
+                          release M = M0 exp(-beta t)                  (= M_p e^-bt, M0=M_p)
+  effect power_law        engage  M = M0 + (M_p - M0) min(t/t_c, 1)^z   (= B t^z, B = M_p/t_c^z)
+                          release M = M0 (1 - min(t/t_r, 1))^z          (the engagement retraced)
+Command (input `command`, >= 0.5 means 1): an edge 0 -> 1 engages brake b and releases brake h
+(engagement, period 2, then working stroke, period 3, once b locks); an edge 1 -> 0 releases b and
+engages h (stopping, period 4, then idle, period 1, once h locks). An edge is an event (at a
+communication point, or inside a step if the input changes continuously).
+
+Press coupling: the carrier port (flange_tau/flange_J in, flange_w/flange_phi out) lets a press be
+coupled later. Coupling a press that has its own dynamics rigidly to the carrier is the classic
+hard case of co-simulation (two inertias on one rigid shaft, algebraic loop through the
+torque): see docs/models/planetary_drive.md.
+"""
+from __future__ import annotations
+
+import copy
+import itertools
+import math
+
+import numpy as np
+
+from ...runtime.model import Effect, ParameterError, PhysicsModel, Variable
+
+MEMBERS = ("b", "h")      # braked members
+ELEMENTS = ("a", "b", "h")  # friction elements: sun resistance, ring and carrier brakes
+# state layout
+I_PHI = {"b": 0, "h": 1}
+I_W = {"b": 2, "h": 3}
+I_EB, I_EH, I_ER, I_WS, I_WF = 4, 5, 6, 7, 8
+# input layout
+U_CMD, U_TAU, U_JA, U_FTAU, U_FJ = 0, 1, 2, 3, 4
+
+NEVER = -1.0  # event-time outputs before the first such event
+
+
+class PlanetaryClutchDrive(PhysicsModel):
+    model_name = "PlanetaryClutchDrive"
+    description = ("Type-A planetary drive with friction brakes on ring and carrier: engagement, "
+                   "working stroke, stopping, idle; stick-slip locking")
+    seed = "planetary_drive_friction_clutch.txt, eq. (1)-(10)"
+    integrator = "DOP853"
+
+    parameters = (
+        Variable("r_a", "m", "Pitch radius of the sun gear a", 0.10, min=0.0),
+        Variable("r_b", "m", "Pitch radius of the ring gear b (p = r_b/r_a)", 0.25, min=0.0),
+        Variable("J_a", "kg.m2", "Inertia of the sun a with everything rigidly on it (rotor, "
+                 "flywheel); the port input sun_J is added", 4.0, min=0.0),
+        Variable("J_b", "kg.m2", "Inertia of the ring b", 0.5, min=0.0),
+        Variable("J_h", "kg.m2", "Inertia of the carrier h with the planets lumped in; the port "
+                 "input flange_J is added", 5.0, min=0.0),
+        Variable("M_ca", "N.m", "Resistance torque on the sun (Coulomb, opposes w_a; holds the "
+                 "sun at rest up to M_ca)", 5.0, min=0.0),
+        Variable("M_cb", "N.m", "Resistance torque on the ring (Coulomb, opposes w_b)", 3.0,
+                 min=0.0),
+        Variable("M_ch", "N.m", "Resistance torque on the carrier (Coulomb, opposes w_h; the "
+                 "press load for now)", 40.0, min=0.0),
+        Variable("Mp_b", "N.m", "Brake b (ring) design torque M_p, fully engaged", 1000.0,
+                 min=0.0),
+        Variable("alpha_b", "1/s", "Brake b engagement rate (exponential law)", 30.0, min=0.0),
+        Variable("beta_b", "1/s", "Brake b release rate (exponential law)", 40.0, min=0.0),
+        Variable("Mp_h", "N.m", "Brake h (carrier) design torque M_p, fully engaged", 1500.0,
+                 min=0.0),
+        Variable("alpha_h", "1/s", "Brake h engagement rate (exponential law)", 30.0, min=0.0),
+        Variable("beta_h", "1/s", "Brake h release rate (exponential law)", 40.0, min=0.0),
+        Variable("tc_b", "s", "Brake b engagement time t_c (effect power_law)", 0.1, min=0.0),
+        Variable("tr_b", "s", "Brake b release time t_r (effect power_law)", 0.075, min=0.0),
+        Variable("z_b", "1", "Brake b exponent z of B t^z (effect power_law)", 1.5, min=0.0),
+        Variable("tc_h", "s", "Brake h engagement time t_c (effect power_law)", 0.1, min=0.0),
+        Variable("tr_h", "s", "Brake h release time t_r (effect power_law)", 0.075, min=0.0),
+        Variable("z_h", "1", "Brake h exponent z of B t^z (effect power_law)", 1.5, min=0.0),
+        Variable("initial_period", "1", "Start state: 1 = idle (carrier held by its engaged "
+                 "brake, ring free, command 0), 3 = working stroke (ring held, command 1)", 1.0,
+                 min=1.0, max=3.0),
+        Variable("w_a_start", "rad/s", "Sun (motor) speed at the start; the free member follows "
+                 "from Willis, the held one is at rest", 104.0),
+        Variable("phi_b_start", "rad", "Ring angle at the start", 0.0),
+        Variable("phi_h_start", "rad", "Carrier angle at the start", 0.0),
+    )
+    effects = (
+        Effect("power_law", "Brake torques follow B t^z (engage) and its retrace (release) "
+               "instead of the exponential laws"),
+    )
+    inputs = (
+        Variable("command", "1", "1 = engage / working stroke, 0 = stop; a change of value "
+                 "(threshold 0.5) starts engagement or stopping", 0.0, min=0.0, max=1.0),
+        Variable("sun_tau", "N.m", "Motor torque on the sun (port)", 0.0),
+        Variable("sun_J", "kg.m2", "Inertia rigidly on the sun from the motor (port, added to "
+                 "J_a)", 0.0, min=0.0),
+        Variable("flange_tau", "N.m", "External torque on the carrier from a coupled press "
+                 "(port)", 0.0),
+        Variable("flange_J", "kg.m2", "Inertia rigidly on the carrier from a coupled press "
+                 "(port, added to J_h)", 0.0, min=0.0),
+    )
+    _ff = ("sun_tau", "sun_J", "flange_tau", "flange_J")
+    outputs = (
+        Variable("sun_w", "rad/s", "Sun angular velocity w_a (port)"),
+        Variable("sun_phi", "rad", "Sun angle -p phi_b + (1+p) phi_h (port)"),
+        Variable("flange_w", "rad/s", "Carrier angular velocity w_h (port)"),
+        Variable("flange_phi", "rad", "Carrier angle phi_h (port)"),
+        Variable("w_a", "rad/s", "Sun angular velocity"),
+        Variable("w_b", "rad/s", "Ring angular velocity (exactly 0 while locked)"),
+        Variable("w_h", "rad/s", "Carrier angular velocity (exactly 0 while locked)"),
+        Variable("M_tb", "N.m", "Brake b torque capacity M_tb(t) from its law"),
+        Variable("M_th", "N.m", "Brake h torque capacity M_th(t) from its law"),
+        Variable("tau_b", "N.m", "Friction torque acting on the ring (brake + resistance; the "
+                 "constraint torque while locked)", depends_on=_ff),
+        Variable("tau_h", "N.m", "Friction torque acting on the carrier (brake + resistance; the "
+                 "constraint torque while locked)", depends_on=_ff),
+        Variable("tau_a", "N.m", "Resistance torque acting on the sun (-M_ca while turning "
+                 "forwards; the constraint torque while at rest)", depends_on=_ff),
+        Variable("E_brake_b", "J", "Energy dissipated in brake b (cumulative)"),
+        Variable("E_brake_h", "J", "Energy dissipated in brake h (cumulative)"),
+        Variable("E_resist", "J", "Energy lost to the resistance torques M_ca, M_cb, M_ch "
+                 "(cumulative)"),
+        Variable("W_sun", "J", "Work done on the sun through the port (cumulative)"),
+        Variable("W_flange", "J", "Work done on the carrier through the port (cumulative)"),
+        Variable("E_kin", "J", "Kinetic energy of sun, ring and carrier (with port inertias)",
+                 depends_on=("sun_J", "flange_J")),
+        Variable("period", "1", "1 idle, 2 engagement, 3 working stroke, 4 stopping"),
+        Variable("t_command", "s", "Time of the last command edge (-1: none yet)"),
+        Variable("t_lock_b", "s", "Time the ring last locked (-1: none yet)"),
+        Variable("t_slip_b", "s", "Time the ring last broke free (-1: none yet)"),
+        Variable("t_lock_h", "s", "Time the carrier last locked (-1: none yet)"),
+        Variable("t_slip_h", "s", "Time the carrier last broke free (-1: none yet)"),
+        Variable("n_lock_b", "1", "Number of ring locks"),
+        Variable("n_lock_h", "1", "Number of carrier locks"),
+        Variable("n_events", "1", "Number of mode events (locks, break-frees, passes through "
+                 "zero speed, command edges)"),
+    )
+
+    # -- parameters ------------------------------------------------------------------------
+    def check(self, p):
+        if p.r_a <= 0.0:
+            raise ParameterError(self.model_name, "r_a", p.r_a, "> 0 m")
+        if p.r_b <= p.r_a:
+            raise ParameterError(self.model_name, "r_b", p.r_b,
+                                 f"> r_a = {p.r_a} m (the ring surrounds sun and planets)")
+        if p.J_a + p.J_b <= 0.0 or p.J_h <= 0.0:
+            name, val = ("J_h", p.J_h) if p.J_h <= 0.0 else ("J_a", p.J_a)
+            raise ParameterError(self.model_name, name, val,
+                                 "> 0 (the mass matrix must stay positive definite)")
+        if p.initial_period not in (1.0, 3.0):
+            raise ParameterError(self.model_name, "initial_period", p.initial_period,
+                                 "1 (idle) or 3 (working stroke)")
+        law = ("tc_b", "tr_b", "z_b", "tc_h", "tr_h", "z_h") if self.on("power_law") else \
+              ("alpha_b", "beta_b", "alpha_h", "beta_h")
+        for name in law:
+            if getattr(p, name) <= 0.0:
+                raise ParameterError(self.model_name, name, getattr(p, name),
+                                     "> 0 for the chosen brake law")
+
+    @property
+    def ratio(self) -> float:
+        """p = r_b/r_a = -i_ab^h."""
+        return self.p.r_b / self.p.r_a
+
+    # -- discrete state --------------------------------------------------------------------
+    def _fresh_discrete(self) -> dict:
+        p = self.p
+        stroke = p.initial_period == 3.0
+        d = {
+            "command": 1 if stroke else 0,
+            "t_command": NEVER,
+            # brake: [engaging (1) or releasing (0), t0 of the law, M0 at t0]
+            "brake_b": [1, 0.0, p.Mp_b] if stroke else [0, 0.0, 0.0],
+            "brake_h": [0, 0.0, 0.0] if stroke else [1, 0.0, p.Mp_h],
+            "dir_a": 1, "dir_b": 0, "dir_h": 0,  # +1/-1 sliding, 0 locked
+            "t_last": -math.inf,  # time of the last discrete update (power-law breakpoints)
+            "t_lock_a": NEVER, "t_slip_a": NEVER, "t_lock_b": NEVER, "t_slip_b": NEVER,
+            "t_lock_h": NEVER, "t_slip_h": NEVER,
+            "n_lock_a": 0, "n_lock_b": 0, "n_lock_h": 0, "n_slip_a": 0, "n_slip_b": 0,
+            "n_slip_h": 0, "n_pass": 0,
+            "n_events": 0,
+        }
+        return d
+
+    def discrete_state(self) -> dict:
+        d = copy.deepcopy(self.d)
+        d["t_last"] = None if d["t_last"] == -math.inf else d["t_last"]
+        return d
+
+    def set_discrete_state(self, state: dict) -> None:
+        d = copy.deepcopy(state)
+        d["t_last"] = -math.inf if d["t_last"] is None else float(d["t_last"])
+        self.d = d
+
+    def __init__(self, parameters=None, effects=None):
+        super().__init__(parameters, effects)
+        self._derive()
+        self.d = self._fresh_discrete()
+        self._event_kinds: list[tuple] = []
+
+    def _derive(self) -> None:
+        """Constants derived from the parameters (again in initial_state, so a host that sets
+        parameters on self.p after construction is safe)."""
+        pr = self.ratio
+        self._G = {"a": np.array([-pr, 1.0 + pr]), "b": np.array([1.0, 0.0]),
+                   "h": np.array([0.0, 1.0])}
+        self._N = {"a": np.array([1.0 + pr, pr]), "b": np.array([0.0, 1.0]),
+                   "h": np.array([1.0, 0.0])}
+        p = self.p
+        self._laws = {k: (getattr(p, "Mp_" + k), getattr(p, "alpha_" + k),
+                          getattr(p, "beta_" + k), getattr(p, "tc_" + k),
+                          getattr(p, "tr_" + k), getattr(p, "z_" + k)) for k in MEMBERS}
+        self._power = self.on("power_law")
+
+    # -- brake laws ------------------------------------------------------------------------
+    def _law(self, k):
+        """(M_p, alpha, beta, t_c, t_r, z) of brake k."""
+        return self._laws[k]
+
+    def brake_torque(self, k: str, t: float) -> float:
+        """Torque capacity M_tk(t) of brake k from its law and the last command edge."""
+        engaging, t0, M0 = self.d["brake_" + k]
+        Mp, alpha, beta, tc, tr, z = self._law(k)
+        tau = max(t - t0, 0.0)
+        if engaging:
+            if M0 == Mp:
+                return Mp
+            if self._power:
+                return M0 + (Mp - M0) * min(tau / tc, 1.0) ** z
+            return Mp - (Mp - M0) * math.exp(-alpha * tau)
+        if M0 == 0.0:
+            return 0.0
+        if self._power:
+            return M0 * (1.0 - min(tau / tr, 1.0)) ** z
+        return M0 * math.exp(-beta * tau)
+
+    def _breakpoints(self) -> list[float]:
+        """Kinks of the power law (t0 + t_c, t0 + t_r) after the last discrete update."""
+        if not self.on("power_law"):
+            return []
+        out = []
+        for k in MEMBERS:
+            engaging, t0, M0 = self.d["brake_" + k]
+            Mp, _, _, tc, tr, _ = self._law(k)
+            if (engaging and M0 != Mp) or (not engaging and M0 != 0.0):
+                tb = t0 + (tc if engaging else tr)
+                if tb > self.d["t_last"]:
+                    out.append(tb)
+        return out
+
+    # -- mechanics -------------------------------------------------------------------------
+    def mass_matrix(self, u) -> np.ndarray:
+        p, pr = self.p, self.ratio
+        Ja = p.J_a + u[U_JA]
+        Jh = p.J_h + u[U_FJ]
+        return np.array([[Ja * pr * pr + p.J_b, -Ja * pr * (1 + pr)],
+                         [-Ja * pr * (1 + pr), Ja * (1 + pr) ** 2 + Jh]])
+
+    def _geometry(self):
+        """G_k (w_k = G_k . v, v = (w_b, w_h)) and N_k (G_k . N_k = 0) of the friction elements."""
+        return self._G, self._N
+
+    def _loads(self, t, u):
+        """(M, Q, C): mass matrix, generalised port torques, friction capacities."""
+        p = self.p
+        Q = u[U_TAU] * self._G["a"] + np.array([0.0, u[U_FTAU]])
+        C = {"a": p.M_ca, "b": self.brake_torque("b", t) + p.M_cb,
+             "h": self.brake_torque("h", t) + p.M_ch}
+        return self.mass_matrix(u), Q, C
+
+    def _dirs(self) -> dict:
+        return {k: self.d["dir_" + k] for k in ELEMENTS}
+
+    def _solve(self, t, u, dirs=None):
+        """Accelerations (dw_b, dw_h), friction torques F_k and capacities C_k in the modes
+        `dirs` (default: the current ones). Locked sets are {}, {j} or all three (two locked
+        members hold the third at rest by Willis); with all three locked the friction torques
+        are statically indeterminate: F_a is chosen closest to 0 in its feasible interval and
+        `slack` is the interval's width (negative: the rest cannot be held)."""
+        dirs = self._dirs() if dirs is None else dirs
+        M, Q, C = self._loads(t, u)
+        G, N = self._geometry()
+        F = {k: -C[k] * d for k, d in dirs.items() if d}
+        Qt = Q + sum((F[k] * G[k] for k in F), np.zeros(2))
+        locked = [k for k in ELEMENTS if not dirs[k]]
+        slack = math.inf
+        if not locked:
+            det = M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]
+            a = np.array([M[1, 1] * Qt[0] - M[0, 1] * Qt[1],
+                          M[0, 0] * Qt[1] - M[1, 0] * Qt[0]]) / det
+        elif len(locked) == 1:
+            j = locked[0]
+            n = N[j]
+            a = (n @ Qt) / (n @ M @ n) * n
+            F[j] = float(G[j] @ (M @ a - Qt)) / float(G[j] @ G[j])
+        else:
+            a = np.zeros(2)
+            lo, hi, F_a = self._rest_interval(Qt, C)
+            slack = hi - lo
+            pr = self.ratio
+            F["a"], F["b"], F["h"] = F_a, -Qt[0] + pr * F_a, -Qt[1] - (1 + pr) * F_a
+        return a, F, C, slack
+
+    def _rest_interval(self, Q, C):
+        """All at rest: F_b = -Q_b + p F_a, F_h = -Q_h - (1+p) F_a; the F_a that keep every
+        |F_k| <= C_k form [lo, hi]. Returns (lo, hi, F_a closest to 0 within it)."""
+        pr = self.ratio
+        lo = max(-C["a"], (Q[0] - C["b"]) / pr, (-Q[1] - C["h"]) / (1 + pr))
+        hi = min(C["a"], (Q[0] + C["b"]) / pr, (-Q[1] + C["h"]) / (1 + pr))
+        F_a = min(max(0.0, lo), hi) if lo <= hi else 0.5 * (lo + hi)
+        return lo, hi, F_a
+
+    def _choose_modes(self, t, u, zero, forced=None, shrink=1.0) -> None:
+        """Modes of the members in `zero` (speed exactly zero now), the others keeping theirs
+        (`forced`: members made to slide in a given direction). Coulomb friction with
+        given capacities has a unique acceleration: the minimiser of the convex function
+            f(a) = 1/2 a.M.a - Qt.a + sum_{k in zero} C_k |G_k.a|
+        (Gauss's principle with maximum dissipation; Qt includes the sliding frictions). Its
+        minimiser is one of: a = 0 (all of `zero` stuck), a on the line G_j.a = 0 (j stuck,
+        the others slide), or a smooth point of one sign pattern (all slide): evaluate f at
+        each candidate and keep the least. `shrink` < 1 scales the stuck capacities (used at a
+        break-free event to decide on the side of breaking free)."""
+        for k, direction in (forced or {}).items():
+            self.d["dir_" + k] = direction
+        dirs = self._dirs()
+        zero = [k for k in ELEMENTS if k in zero and k not in (forced or {})]
+        M, Q, C = self._loads(t, u)
+        G, N = self._geometry()
+        Qt = Q + sum((-C[k] * dirs[k] * G[k] for k in ELEMENTS
+                      if k not in zero and dirs[k]), np.zeros(2))
+        Cz = {k: shrink * C[k] for k in zero}
+
+        def f(a):
+            return 0.5 * a @ M @ a - Qt @ a + sum(Cz[k] * abs(G[k] @ a) for k in zero)
+
+        candidates = [(np.zeros(2), set(zero))]
+        for j in zero:
+            n = N[j]
+            q = float(Qt @ n)
+            c = sum(Cz[k] * abs(G[k] @ n) for k in zero if k != j)
+            lam = math.copysign(max(abs(q) - c, 0.0), q) / float(n @ M @ n)
+            if lam != 0.0:
+                candidates.append((lam * n, {j}))
+        for signs in itertools.product((-1.0, 1.0), repeat=len(zero)):
+            rhs = Qt - sum((Cz[k] * s * G[k] for k, s in zip(zero, signs)), np.zeros(2))
+            a = np.linalg.solve(M, rhs)
+            if all(s * (G[k] @ a) > 0.0 for k, s in zip(zero, signs)):
+                candidates.append((a, set()))
+        a, stuck = min(candidates, key=lambda c: (f(c[0]), -len(c[1])))
+        if len(stuck) == 2:  # two stuck hold the third (cannot happen for the minimiser)
+            stuck = set(ELEMENTS)
+        for k in zero:
+            self.d["dir_" + k] = 0 if k in stuck else (1 if G[k] @ a > 0.0 else -1)
+
+    def _lock_set(self):
+        return [k for k in ELEMENTS if not self.d["dir_" + k]]
+
+    def _record(self, t, before: dict) -> None:
+        """Count locks and break-frees between the modes `before` and now."""
+        for k in ELEMENTS:
+            old, new = before[k], self.d["dir_" + k]
+            if old and not new:
+                self.d["n_lock_" + k] += 1
+                self.d["t_lock_" + k] = float(t)
+            elif not old and new:
+                self.d["n_slip_" + k] += 1
+                self.d["t_slip_" + k] = float(t)
+
+    def _zero_speeds(self, x) -> np.ndarray:
+        """Put the locked members' speeds exactly at zero (all locked: everything at rest)."""
+        locked = self._lock_set()
+        if len(locked) >= 2:
+            x[I_W["b"]] = x[I_W["h"]] = 0.0
+        elif locked == ["b"] or locked == ["h"]:
+            x[I_W[locked[0]]] = 0.0
+        elif locked == ["a"]:  # w_a = -p w_b + (1+p) w_h = 0
+            pr = self.ratio
+            x[I_W["b"]] = (1 + pr) * x[I_W["h"]] / pr
+        return x
+
+    def period(self) -> int:
+        if self.d["command"]:
+            return 3 if self.d["dir_b"] == 0 else 2
+        return 1 if self.d["dir_h"] == 0 else 4
+
+    def _apply_command(self, t, value: int) -> None:
+        for k in MEMBERS:
+            M_now = self.brake_torque(k, t)
+            engage = (k == "b") == bool(value)
+            self.d["brake_" + k] = [1 if engage else 0, float(t), M_now]
+        self.d["command"] = int(value)
+        self.d["t_command"] = float(t)
+        self.d["n_events"] += 1
+
+    def _holds(self, t, u) -> bool:
+        """Do the present locks hold (friction torques within capacity)?"""
+        _, F, C, slack = self._solve(t, u)
+        locked = self._lock_set()
+        if len(locked) == 3:
+            return slack >= 0.0
+        return all(abs(F[k]) <= C[k] for k in locked)
+
+    def on_input_change(self, t, x, u) -> np.ndarray:
+        """Discrete update for inputs that jumped at time t (a communication point): a command
+        edge starts engagement/stopping, and locks that no longer hold break free. Hosts that
+        integrate the model themselves (monolithic references) call this after every input
+        discontinuity."""
+        value = 1 if u[U_CMD] >= 0.5 else 0
+        if value != self.d["command"]:
+            self._apply_command(t, value)
+        if not self._holds(t, u):
+            before = self._dirs()
+            self._choose_modes(t, u, self._lock_set(), shrink=1.0 - 1e-9)
+            self._record(t, before)
+            self.d["n_events"] += 1
+        return x
+
+    # -- contract --------------------------------------------------------------------------
+    def state_names(self):
+        return ("phi_b", "phi_h", "w_b", "w_h", "E_brake_b", "E_brake_h", "E_resist", "W_sun",
+                "W_flange")
+
+    def initial_state(self, u):
+        p, pr = self.p, self.ratio
+        u = np.asarray(u, dtype=float)
+        self._derive()
+        self.d = self._fresh_discrete()
+        x = np.zeros(9)
+        x[I_PHI["b"]], x[I_PHI["h"]] = p.phi_b_start, p.phi_h_start
+        if p.initial_period == 1.0:  # carrier held, ring turns backwards
+            x[I_W["b"]] = -p.w_a_start / pr
+        else:  # ring held, carrier forwards
+            x[I_W["h"]] = p.w_a_start / (1 + pr)
+        w = {"a": p.w_a_start, "b": x[I_W["b"]], "h": x[I_W["h"]]}
+        for k in ELEMENTS:
+            self.d["dir_" + k] = int(np.sign(w[k]))
+        zero = [k for k in ELEMENTS if w[k] == 0.0]
+        self._choose_modes(0.0, u, zero)
+        return self._zero_speeds(x)
+
+    def state_nominal(self) -> np.ndarray:
+        """Angles ~10 rad, speeds ~ the ring's idle speed, energies ~ the sun's kinetic
+        energy at the start speed (absolute tolerance = rtol * nominal)."""
+        p = self.p
+        w = max(abs(p.w_a_start), 10.0)
+        E = max(0.5 * (p.J_a + p.J_b + p.J_h) * w * w, 1.0)
+        return np.array([10.0, 10.0, w / self.ratio, w / (1 + self.ratio), E, E, E, E, E])
+
+    def sun_speed(self, x) -> float:
+        if self.d["dir_a"] == 0:
+            return 0.0
+        pr = self.ratio
+        return -pr * x[I_W["b"]] + (1 + pr) * x[I_W["h"]]
+
+    def derivatives(self, t, x, u):
+        p = self.p
+        a, _, C, _ = self._solve(t, u)
+        w_b, w_h = x[I_W["b"]], x[I_W["h"]]
+        d = self.d
+        w_a = self.sun_speed(x)
+        slip_a, slip_b, slip_h = d["dir_a"] * w_a, d["dir_b"] * w_b, d["dir_h"] * w_h
+        return np.array([
+            w_b, w_h, a[0], a[1],
+            (C["b"] - p.M_cb) * slip_b,
+            (C["h"] - p.M_ch) * slip_h,
+            p.M_ca * slip_a + p.M_cb * slip_b + p.M_ch * slip_h,
+            u[U_TAU] * w_a,
+            u[U_FTAU] * w_h,
+        ])
+
+    def kinetic_energy(self, x, u) -> float:
+        w = np.array([x[I_W["b"]], x[I_W["h"]]])
+        return 0.5 * float(w @ self.mass_matrix(u) @ w)
+
+    def output_values(self, t, x, u):
+        pr = self.ratio
+        _, F, _, _ = self._solve(t, u)
+        w_a = self.sun_speed(x)
+        phi_a = -pr * x[I_PHI["b"]] + (1 + pr) * x[I_PHI["h"]]
+        d = self.d
+        return np.array([
+            w_a, phi_a, x[I_W["h"]], x[I_PHI["h"]],
+            w_a, x[I_W["b"]], x[I_W["h"]],
+            self.brake_torque("b", t), self.brake_torque("h", t), F["b"], F["h"], F["a"],
+            x[I_EB], x[I_EH], x[I_ER], x[I_WS], x[I_WF], self.kinetic_energy(x, u),
+            float(self.period()), d["t_command"], d["t_lock_b"], d["t_slip_b"],
+            d["t_lock_h"], d["t_slip_h"], float(d["n_lock_b"]), float(d["n_lock_h"]),
+            float(d["n_events"]),
+        ], dtype=float)
+
+    # -- events ----------------------------------------------------------------------------
+    def event_functions(self, u_of_t):
+        kinds, funcs = [], []
+        G, _ = self._geometry()
+
+        def add(kind, g, direction):
+            g.terminal, g.direction = True, direction
+            kinds.append(kind)
+            funcs.append(g)
+
+        locked = self._lock_set()
+        if len(locked) == 3:  # all at rest: the feasible interval of F_a closes
+            add(("break_rest",), lambda t, x: self._solve(t, u_of_t(t))[3], -1)
+        for k in ELEMENTS:
+            if self.d["dir_" + k] == 0:
+                if len(locked) == 1:
+                    def g_fwd(t, x, k=k):  # F_k -> -C_k: breaks free forwards
+                        _, F, C, _ = self._solve(t, u_of_t(t))
+                        return C[k] + F[k]
+
+                    def g_bwd(t, x, k=k):  # F_k -> +C_k: breaks free backwards
+                        _, F, C, _ = self._solve(t, u_of_t(t))
+                        return C[k] - F[k]
+
+                    add(("slip", k, +1), g_fwd, -1)
+                    add(("slip", k, -1), g_bwd, -1)
+            else:
+                add(("zero", k), lambda t, x, gk=G[k]: float(gk @ x[2:4]),
+                    -self.d["dir_" + k])
+        sign = 1.0 if self.d["command"] == 0 else -1.0
+        add(("command",), lambda t, x: sign * (u_of_t(t)[U_CMD] - 0.5), 1)
+        for tb in self._breakpoints():
+            add(("time", tb), lambda t, x, tb=tb: t - tb, 1)
+        self._event_kinds = kinds
+        return funcs
+
+    def on_event(self, t, x, u, index):
+        kind = self._event_kinds[index]
+        x = np.array(x, dtype=float)
+        d = self.d
+        d["t_last"] = float(t)
+        if kind[0] == "time":
+            return x
+        d["n_events"] += 1
+        before = self._dirs()
+        if kind[0] == "slip":  # the single locked member breaks free in the event's direction
+            k = kind[1]
+            self._choose_modes(t, u, [], forced={k: kind[2]})
+        elif kind[0] == "break_rest":
+            self._choose_modes(t, u, list(ELEMENTS), shrink=1.0 - 1e-9)
+        elif kind[0] == "zero":  # member reaches zero speed: lock it if the torques allow
+            k = kind[1]
+            d["dir_" + k] = 0
+            zero = self._lock_set()
+            if len(zero) >= 2:
+                zero = list(ELEMENTS)
+            for j in zero:
+                d["dir_" + j] = 0
+            x = self._zero_speeds(x)
+            self._choose_modes(t, u, zero)
+            if d["dir_" + k] and k in MEMBERS:  # passed through zero without locking
+                d["n_pass"] += 1
+        elif kind[0] == "command":
+            d["n_events"] -= 1  # _apply_command counts it
+            self._apply_command(t, 0 if d["command"] else 1)
+            if not self._holds(t, u):
+                self._choose_modes(t, u, self._lock_set(), shrink=1.0 - 1e-9)
+        self._record(t, before)
+        return self._zero_speeds(x)
+
+    def advance(self, t0, x0, h, u_of_t, rtol, atol):
+        x = np.array(x0, dtype=float)
+        if h <= 0.0:
+            return x
+        x = self.on_input_change(t0, x, u_of_t(t0))
+        return super().advance(t0, x, h, u_of_t, rtol, atol)
+
+    # -- steady states ---------------------------------------------------------------------
+    def steady_sun_torque(self, period: int, flange_tau: float = 0.0) -> float:
+        """Motor torque on the sun that keeps the drive in steady motion (released brake fully
+        off, resistances constant, w_a > 0):
+          period 1 (carrier held, ring turning backwards, w_b = -w_a/p < 0):
+              0 = -p (M - M_ca) + M_cb          ->  M = M_ca + M_cb/p
+          period 3 (ring held, carrier forward, w_h = w_a/(1+p) > 0):
+              0 = (1+p)(M - M_ca) + tau_fl - M_ch  ->  M = M_ca + (M_ch - tau_fl)/(1+p)"""
+        p, pr = self.p, self.ratio
+        if period == 1:
+            return p.M_ca + p.M_cb / pr
+        if period == 3:
+            return p.M_ca + (p.M_ch - flange_tau) / (1 + pr)
+        raise ValueError("steady states exist in periods 1 and 3 only")
+
+    def holding_torque(self, period: int, flange_tau: float = 0.0) -> float:
+        """Constraint torque F_k on the held member in the steady state of `period` (carrier in
+        period 1, ring in period 3); it must stay within the capacity M_p + M_ck."""
+        pr = self.ratio
+        M_A = self.steady_sun_torque(period, flange_tau) - self.p.M_ca
+        if period == 1:
+            return -(1 + pr) * M_A - flange_tau
+        return pr * M_A
+
+
+def steady_state(drive: PlanetaryClutchDrive, motor, period: int,
+                 flange_tau: float = 0.0) -> dict:
+    """Steady state of drive + motor in period 1 (idle) or 3 (working stroke).
+
+    `motor` is anything with speed_at_torque(M) (e.g. InductionMotor). Returns the speeds, the
+    motor torque and the holding torque of the held member."""
+    M = drive.steady_sun_torque(period, flange_tau)
+    w_a = motor.speed_at_torque(M)
+    pr = drive.ratio
+    if period == 1:
+        w_b, w_h = -w_a / pr, 0.0
+    else:
+        w_b, w_h = 0.0, w_a / (1 + pr)
+    return {"w_a": w_a, "w_b": w_b, "w_h": w_h, "M_motor": M,
+            "holding_torque": drive.holding_torque(period, flange_tau)}

@@ -1,0 +1,232 @@
+"""Crank-rocker hammer: a motor-driven crank swings the impact rocker through a spring rod
+(docs/models/crank_rocker.md; the rocker, contact and support are RockerImpact's, MODELS.md 4).
+
+    Geometry (x along the tool axis toward the tool, y up, pivot O at (u0, 0)):
+        strike point  O + S (sin th, -cos th)          (moves along +x by S th near th = 0)
+        rod eye B     O + b (sin(th + beta), -cos(th + beta))   (beta = pi: arm above O)
+        crank pin Q   A + a (cos phi, sin phi),  A = (crank_x, crank_y)
+        rod           spring-damper between Q and B: F = k_rod (l - L0) + c_rod l'  (tension > 0)
+
+Why a compliant rod: the tool sits at the rocker's extreme position, which is a dead centre of
+the crank-rocker (d th/d phi = 0), so a rigid linkage would reach the tool at zero speed and,
+during the 0.4 ms impact, would have to stop the crank and the motor with it. With a spring rod
+the rocker is a DOF of its own (a spring-driven oscillator): it over-swings the kinematic
+extreme, strikes, rebounds, and the crank (the DOF the motor torque drives, never at a dead
+centre for its own equation) only feels the rod force k_rod (l - L0), which stays bounded.
+
+Equations: the crank, J_cr phi'' = i tau_m + M_rod, J_cr = J_crank + i^2 J_motor (motor on the
+crank through a gear of ratio i = motor speed / crank speed); the rocker as in RockerImpact with
+the rod force as applied force at B (torque about O and component along the tool axis on the
+pivot). Energy: E_mech + E_radiated + E_damped = E_mech(0) + W_drive.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ...runtime.model import Effect, ParameterError, Variable
+from .rocker_impact import RockerImpact
+from ...runtime.roots import brentq
+
+_ROCKER_PARAMETERS = tuple(v for v in RockerImpact.parameters
+                           if v.name not in ("strike_at_start", "theta_start", "w_start"))
+
+
+class CrankRockerHammer(RockerImpact):
+    model_name = "CrankRockerHammer"
+    description = ("Crank-rocker hammer: motor-driven crank, spring rod, rocker striking an "
+                   "elastic rod tool on an elastic pivot support")
+    seed = "rocker_impact_unit.txt (rocker, contact, support); linkage: docs/models/crank_rocker.md"
+
+    parameters = _ROCKER_PARAMETERS + (
+        Variable("crank_radius", "m", "Crank radius a", 0.04, min=0.0),
+        Variable("arm_length", "m", "Distance pivot - rod eye b on the rocker", 0.15, min=0.0),
+        Variable("arm_angle", "rad", "Angle of the rod eye from the pivot-strike line (pi: on "
+                 "the far side of the pivot)", math.pi),
+        Variable("crank_x", "m", "Crank centre A along the tool axis, from the pivot", -0.60),
+        Variable("crank_y", "m", "Crank centre A across the tool axis, from the pivot", 0.15),
+        Variable("rod_length", "m", "Free length L0 of the rod; 0: the length at the strike "
+                 "position (theta = 0) with the crank at its outer dead centre", 0.0, min=0.0),
+        Variable("k_rod", "N/m", "Rod (spring) stiffness", 6.0e4, min=0.0),
+        Variable("c_rod", "N.s/m", "Rod damping", 0.0, min=0.0),
+        Variable("J_crank", "kg.m2", "Crank inertia about its axis", 0.5, min=0.0),
+        Variable("gear_ratio", "1", "Motor speed / crank speed", 5.0, min=0.0),
+        Variable("phi_start", "rad", "Crank angle at the start (0: inner dead centre); the "
+                 "rocker starts at rest with the rod at its free length", 0.0),
+        Variable("support_damping", "N.s/m", "Viscous damping of the elastic pivot support "
+                 "(0: the paper's undamped support)", 0.0, min=0.0),
+    )
+    effects = RockerImpact.effects
+    inputs = (
+        Variable("flange_tau", "N.m", "Motor torque on the motor shaft (crank side of the gear)",
+                 0.0),
+        Variable("flange_J", "kg.m2", "Inertia rigidly on the motor shaft (rotor, flywheel)",
+                 0.0, min=0.0),
+    )
+    outputs = (
+        Variable("flange_w", "rad/s", "Motor shaft speed i phi'"),
+        Variable("flange_phi", "rad", "Motor shaft angle i phi"),
+        Variable("phi", "rad", "Crank angle"),
+        Variable("w_crank", "rad/s", "Crank speed"),
+        Variable("theta", "rad", "Rocker angle from the strike position"),
+        Variable("omega", "rad/s", "Rocker angular speed"),
+        Variable("F_rod", "N", "Rod force (tension > 0)"),
+        Variable("M_load", "N.m", "Load torque of the rod on the motor shaft, -M_rod/i"),
+        Variable("W_drive", "J", "Work of the motor torque, cumulative"),
+        Variable("E_damped", "J", "Energy dissipated in the rod and support dampers, cumulative"),
+    ) + tuple(v for v in RockerImpact.outputs if v.name not in ("flange_w", "flange_phi"))
+
+    def __init__(self, parameters=None, effects=None):
+        super().__init__(parameters, effects)
+        self._L0 = self.free_length
+
+    def _check_geometry(self, p):
+        for name in ("crank_radius", "arm_length", "gear_ratio"):
+            if getattr(p, name) <= 0.0:
+                raise ParameterError(self.model_name, name, getattr(p, name), "> 0")
+        if p.k_rod <= 0.0:
+            raise ParameterError(self.model_name, "k_rod", p.k_rod, "> 0 N/m")
+        if math.hypot(p.crank_x, p.crank_y) <= p.crank_radius + p.arm_length:
+            raise ParameterError(self.model_name, "crank_x", p.crank_x,
+                                 "a crank centre farther from the pivot than crank_radius + "
+                                 "arm_length (the crank would sweep through the rocker)")
+
+    def check(self, p):
+        self._check_rocker(p, needs_V0=True)
+        self._check_geometry(p)
+
+    # -- geometry -----------------------------------------------------------------------------
+    @property
+    def gap(self) -> float:
+        return self.p.tool_gap
+
+    def _eye(self, u0, th):
+        p = self.p
+        ang = th + p.arm_angle
+        return np.array([u0 + p.arm_length * math.sin(ang), -p.arm_length * math.cos(ang)])
+
+    def _pin(self, phi):
+        p = self.p
+        return np.array([p.crank_x + p.crank_radius * math.cos(phi),
+                         p.crank_y + p.crank_radius * math.sin(phi)])
+
+    @property
+    def free_length(self) -> float:
+        if self.p.rod_length > 0.0:
+            return self.p.rod_length
+        return float(np.linalg.norm(self._pin(math.pi) - self._eye(0.0, 0.0)))
+
+    def rod(self, x):
+        """(F_rod, torque on the rocker about O, force on the rocker along x, torque on the
+        crank, rod stretch l - L0, rate l')."""
+        p = self.p
+        u0, v0, th, om = self._split(x)[:4]
+        phi, w = x[-4], x[-3]
+        B, Q = self._eye(u0, th), self._pin(phi)
+        d = Q - B
+        ell = math.hypot(d[0], d[1])
+        e = d / ell
+        ang = th + p.arm_angle
+        dB = np.array([v0 + p.arm_length * om * math.cos(ang), p.arm_length * om * math.sin(ang)])
+        dQ = p.crank_radius * w * np.array([-math.sin(phi), math.cos(phi)])
+        rate = float(e @ (dQ - dB))
+        stretch = ell - self._L0
+        F = p.k_rod * stretch + p.c_rod * rate
+        rB = B - np.array([u0, 0.0])
+        rQ = Q - np.array([p.crank_x, p.crank_y])
+        M_rocker = F * (rB[0] * e[1] - rB[1] * e[0])
+        M_crank = -F * (rQ[0] * e[1] - rQ[1] * e[0])
+        return F, M_rocker, F * e[0], M_crank, stretch, rate
+
+    def kinematic_theta(self, phi: float) -> float:
+        """Rocker angle with the rod at its free length (pivot at rest), on the branch
+        -pi/2 < theta <= small (the rocker hangs toward the tool side of its swing)."""
+        L0 = self.free_length
+        f = lambda th: float(np.linalg.norm(self._pin(phi) - self._eye(0.0, th))) - L0
+        lo, hi = -math.pi / 2, 0.5
+        if f(lo) * f(hi) > 0.0:
+            raise ParameterError(self.model_name, "phi_start", self.p.phi_start,
+                                 "an angle at which the rod (free length) reaches the rocker arm")
+        return brentq(f, lo, hi, xtol=1e-15)
+
+    # -- contract -------------------------------------------------------------------------------
+    def state_names(self):
+        return super().state_names() + ("phi", "w_crank", "W_drive", "E_damped")
+
+    def state_nominal(self) -> np.ndarray:
+        return np.concatenate([super().state_nominal(), [1.0, 30.0, 1e3, 1e3]])
+
+    def _split(self, x):
+        if self.compliant:
+            return tuple(x[:8])
+        return (0.0, 0.0) + tuple(x[:6])
+
+    def initial_state(self, u):
+        p = self.p
+        self._K_cache, self._Z_cache = self.K, self.Z
+        c, c0 = self.stiffnesses(0.0)        # the rocker alone strikes: its own J
+        theta = self.kinematic_theta(p.phi_start)
+        if p.S * theta - self.gap > 0.0:
+            raise ParameterError(self.model_name, "tool_gap", p.tool_gap,
+                                 f">= S theta_start = {p.S * theta:.6g} m (the rocker may not "
+                                 f"start inside the tool)")
+        x = np.array(([0.0, 0.0] if self.compliant else []) +
+                     [theta, 0.0, 0.0, 0.0, 0.0, 0.0, p.phi_start, 0.0, 0.0, 0.0])
+        self._d = self._fresh_discrete(c, c0, False)
+        return x
+
+    def _crank_inertia(self, u) -> float:
+        return self.p.J_crank + self.p.gear_ratio ** 2 * u[1]
+
+    def _support_force(self, u0, v0):
+        return self._spring(u0) + self.p.support_damping * v0
+
+    def _accelerations(self, x, u, P):
+        _, M_rocker, F_axis, _, _, _ = self.rod(x)
+        return self._rocker_accelerations(x, P, M_rocker, self.p.J, F_axis)
+
+    def derivatives(self, t, x, u):
+        p = self.p
+        P = self._force(x)
+        F, M_rocker, F_axis, M_crank, _, rate = self.rod(x)
+        ddu, ddth, _ = self._rocker_accelerations(x, P, M_rocker, p.J, F_axis)
+        _, v0, _, om = self._split(x)[:4]
+        w = x[-3]
+        drive = p.gear_ratio * u[0]
+        loss = p.c_rod * rate * rate + (p.support_damping * v0 * v0 if self.compliant else 0.0)
+        rocker = [om, ddth, P / self._Z, P, P * P / self._Z, 1.0 if self._d["contact"] else 0.0]
+        crank = [w, (drive + M_crank) / self._crank_inertia(u), drive * w, loss]
+        return ([v0, ddu] if self.compliant else []) + rocker + crank
+
+    def mechanical_energy(self, x, u) -> float:
+        """Rocker (own J) and support, contact, crank + motor kinetic energy, rod spring."""
+        w = x[-3]
+        stretch = self.rod(x)[4]
+        rocker = super().mechanical_energy(x, np.array([0.0, 0.0]))
+        return rocker + 0.5 * self._crank_inertia(u) * w * w + 0.5 * self.p.k_rod * stretch ** 2
+
+    def monitor_functions(self, u_of_t):
+        """P' = 0 as in RockerImpact; with the elastic support T' = k(u0) u0' + d0 u0'' = 0,
+        k = dT/du0 of the bearing's spring."""
+        monitors = super().monitor_functions(u_of_t)
+        if not (self._d["contact"] and self.compliant and self.p.support_damping > 0.0):
+            return monitors
+
+        def t_extremum(t, x):
+            u = u_of_t(t)
+            ddu = self._accelerations(x, u, self._force(x))[0]
+            return self.spring_rate(x[0]) * x[1] + self.p.support_damping * ddu
+        t_extremum.terminal, t_extremum.direction = False, 0.0
+        return [monitors[0], t_extremum]
+
+    def _output_dict(self, t, x, u) -> dict:
+        out = super()._output_dict(t, x, u)
+        p = self.p
+        F, _, _, M_crank, _, _ = self.rod(x)
+        _, _, th, om = self._split(x)[:4]
+        phi, w, W, E_d = x[-4:]
+        out.update(flange_w=p.gear_ratio * w, flange_phi=p.gear_ratio * phi, phi=phi,
+                   w_crank=w, theta=th, omega=om, F_rod=F, M_load=-M_crank / p.gear_ratio,
+                   W_drive=W, E_damped=E_d, E_mech=self.mechanical_energy(x, u))
+        return out

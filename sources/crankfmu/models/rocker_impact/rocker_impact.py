@@ -1,0 +1,436 @@
+"""Rocker impact unit (seed rocker_impact_unit, eq. 1-2; MODELS.md section 4).
+
+A rigid rocker (inertia J about the pivot, mass m, centre of mass at r, strike point at S from
+the pivot) strikes the end of a semi-infinite elastic rod (the tool). The pivot rests on an
+elastic support that moves along the tool axis. Coordinates: u0 the pivot displacement (toward
+the tool), theta the rocker angle from the strike position (the strike point moves by
+u0 + S theta), w the tool end. Lagrange (docs/models/rocker_impact.md):
+
+    m u0'' + m r theta''       = -P - T                  T = c0 u0       (support)
+    m r u0'' + J_t theta''     = -P S + tau_drive        J_t = J + flange_J
+    w' = P/Z,  Z = E F/a                                  (rod end, radiation impedance)
+    delta = u0 + S theta - w - gap,  P = c delta  or  K delta^1.5 (effect hertz_contact)
+
+Contact is unilateral: it begins when delta rises through 0 and ends when it falls back to 0
+(P returns to zero); both are located as events inside a communication step. While in contact,
+the largest P (an event on delta' = 0, which is P' = 0) and the largest |T| (events on
+u0' = 0, which is T' = 0, and the value at the end of contact) are located too, so the
+last-impact statistics do not depend on the communication step.
+
+Effect support_compliance off: the pivot is pinned (c0 -> infinity), u0 = 0, the strike-point
+mass is J_t/S^2 and T = -P - m r theta'' is the pivot reaction (it feeds through the drive
+torque and inertia).
+
+Linearised stiffnesses (effect hertz_contact off): c = 1.25 K^(2/3) Pm^(1/3) and
+c0 = k_n Tm^(1/3) from the paper's fixed-point iterations on the first-approximation peaks
+(rocker_linear.linearise, to 0.1 %), at initialization with J_t and the impact speed V0, unless
+c_contact / c_support give them. With hertz_contact on, c0 still comes from that iteration.
+
+Hertzian bearing (effect hertz_support, with support_compliance; seed 004): the support is the
+nonlinear law the paper linearises, T = kappa |u0|^1.5 sgn(u0), kappa = (k_n/1.25)^1.5, with the
+potential energy 0.4 kappa |u0|^2.5. (The linearisation c0 = k_n Tm^(1/3) is 1.25 x its secant
+stiffness T/u0 = kappa^(2/3) T^(1/3) at T = Tm: the same 1.25 as the contact's c.) The contact's
+linearised c, when hertz_contact is off, still comes from the iteration with the linear c0.
+
+The geometry is linearised about the strike position (the paper's model: the strike point moves
+along the tool axis by S theta); a drive may swing the rocker through a few tenths of a radian
+before the strike, the impact itself happens at theta ~ 0.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ...runtime.model import Effect, IntegrationError, ParameterError, PhysicsModel, Variable
+from .rocker_linear import AnalysisError, RockerData, linearise
+
+_MO100_S = 1.1 * 0.734 / (35.1 * 0.106)   # 10 % beyond the centre of percussion J/(m r)
+
+
+class RockerImpact(PhysicsModel):
+    model_name = "RockerImpact"
+    description = ("Rocker striking an elastic rod tool: unilateral contact P, elastic pivot "
+                   "support reaction T, events at contact begin/end and at the force peaks")
+    seed = "rocker_impact_unit.txt, eq. (1)-(2), (5)-(8); MO-100 data"
+    integrator = "DOP853"   # oscillatory, not stiff: k1, k2 ~ 1e4 rad/s, no fast decay
+    max_events_per_step = 10000
+
+    parameters = (
+        Variable("J", "kg.m2", "Rocker moment of inertia about the pivot axis", 0.734, min=0.0),
+        Variable("m", "kg", "Rocker mass", 35.1, min=0.0),
+        Variable("r", "m", "Distance pivot - centre of mass (along the pivot-strike line)", 0.106),
+        Variable("S", "m", "Distance pivot - tool axis (strike point); MO-100: 1.1 J/(m r)",
+                 _MO100_S, min=0.0),
+        Variable("R_c", "m", "Radius of the rocker's spherical striking face", 0.060, min=0.0),
+        Variable("d", "m", "Tool (rod) diameter", 0.080, min=0.0),
+        Variable("E", "Pa", "Young's modulus of rocker, tool and bearings", 2.04e11, min=0.0),
+        Variable("rho", "kg/m3", "Density of the tool", 7850.0, min=0.0),
+        Variable("nu", "1", "Poisson's ratio", 0.3, min=0.0, max=0.5),
+        Variable("V0", "m/s", "Impact speed V0 = omega0 S: start speed when strike_at_start = 1 "
+                 "and the speed the linearised stiffnesses are computed for", 10.0, min=0.0),
+        Variable("k_n", "N(2/3)/m", "Bearing constant of the support, c0 = k_n Tm^(1/3)", 80e6,
+                 min=0.0),
+        Variable("c_contact", "N/m", "Linear contact stiffness c; 0: from the paper's iteration "
+                 "c = 1.25 K^(2/3) Pm^(1/3)", 0.0, min=0.0),
+        Variable("c_support", "N/m", "Support stiffness c0; 0: from the paper's iteration "
+                 "c0 = k_n Tm^(1/3)", 0.0, min=0.0),
+        Variable("iteration_tol", "1", "Relative stop criterion of the stiffness iterations",
+                 1e-3, min=1e-12, max=0.1),
+        Variable("strike_at_start", "1", "1: the rocker touches the tool at the start time with "
+                 "angular speed V0/S; 0: start from theta_start, w_start, tool_gap", 1.0,
+                 min=0.0, max=1.0),
+        Variable("theta_start", "rad", "Rocker angle at the start (strike_at_start = 0); the "
+                 "strike position is theta = tool_gap/S", 0.0),
+        Variable("w_start", "rad/s", "Rocker angular speed at the start (strike_at_start = 0)",
+                 0.0),
+        Variable("tool_gap", "m", "Tool end position at theta = 0 (strike_at_start = 0)", 0.0,
+                 min=0.0),
+    )
+    effects = (
+        Effect("hertz_contact", "Contact P = K delta^1.5 instead of the linearised spring c"),
+        Effect("support_compliance", "Elastic pivot support c0 (off: pinned rocker, "
+                                     "c0 -> infinity, strike-point mass J/S^2)", default=True),
+        Effect("hertz_support", "Hertzian bearing T = kappa |u0|^1.5 sgn(u0), kappa = "
+                                "(k_n/1.25)^1.5, instead of the linearised c0 (needs "
+                                "support_compliance)"),
+    )
+    inputs = (
+        Variable("flange_tau", "N.m", "Drive torque on the rocker shaft", 0.0),
+        Variable("flange_J", "kg.m2", "Drive inertia rigidly on the rocker shaft (added to J)",
+                 0.0, min=0.0),
+    )
+    outputs = (
+        Variable("flange_w", "rad/s", "Rocker angular velocity theta'"),
+        Variable("flange_phi", "rad", "Rocker angle theta"),
+        Variable("P", "N", "Contact force rocker - tool"),
+        Variable("T", "N", "Support reaction (force on the support along the tool axis); "
+                 "pinned: -P - m r theta'', which feeds through the drive torque",
+                 depends_on=("flange_tau", "flange_J")),
+        Variable("contact", "1", "1 while the rocker touches the tool, else 0"),
+        Variable("impulse", "N.s", "Impulse of P over the last (or ongoing) impact"),
+        Variable("E_radiated", "J", "Energy radiated into the rod, integral of P^2/Z, cumulative"),
+        Variable("P_peak", "N", "Largest P of the last (or ongoing) impact"),
+        Variable("T_peak", "N", "Largest |T| during the last (or ongoing) impact"),
+        Variable("impact_duration", "s", "Duration of the last impact (elapsed if ongoing)"),
+        Variable("n_impacts", "1", "Number of impacts so far"),
+        Variable("c_contact_used", "N/m", "Linear contact stiffness in use (0 with Hertz)"),
+        Variable("c_support_used", "N/m", "Support stiffness in use (0 when pinned)"),
+        Variable("V_impact", "m/s", "Approach speed u0' + S theta' of the strike point when the "
+                 "last (or ongoing) impact began"),
+        Variable("u_support", "m", "Pivot displacement u0 along the tool axis (0 when pinned)"),
+        Variable("v_support", "m/s", "Pivot speed u0' (0 when pinned)"),
+        Variable("E_mech", "J", "Kinetic energy of rocker (+ drive inertia) + support and contact "
+                 "potential energy", depends_on=("flange_J",)),
+    )
+
+    def __init__(self, parameters=None, effects=None):
+        super().__init__(parameters, effects)
+        self._d = self._fresh_discrete(c=0.0, c0=None, contact=False)
+        self._hertz_support = self.on("hertz_support")
+        self._kappa = (self.p.k_n / 1.25) ** 1.5  # N/m^1.5, the Hertzian bearing's constant
+
+    def check(self, p):
+        self._check_rocker(p, needs_V0=p.strike_at_start == 1.0)
+        if p.strike_at_start not in (0.0, 1.0):
+            raise ParameterError(self.model_name, "strike_at_start", p.strike_at_start, "0 or 1")
+        if p.strike_at_start == 0.0 and p.S * p.theta_start - p.tool_gap > 0.0:
+            raise ParameterError(self.model_name, "theta_start", p.theta_start,
+                                 f"<= tool_gap/S = {p.tool_gap / p.S:.6g} rad (the rocker may "
+                                 f"not start inside the tool)")
+
+    def _check_rocker(self, p, needs_V0: bool) -> None:
+        """Rocker, contact, rod and support data; V0 when the iterations (or the start) need it."""
+        for name in ("m", "S", "R_c", "d", "E", "rho"):
+            if getattr(p, name) <= 0.0:
+                raise ParameterError(self.model_name, name, getattr(p, name), "> 0")
+        if p.J <= p.m * p.r ** 2:
+            raise ParameterError(self.model_name, "J", p.J,
+                                 f"> m r^2 = {p.m * p.r ** 2:.6g} kg.m2 (inertia about the "
+                                 f"pivot exceeds m r^2 by the central inertia J_C)")
+        if p.nu >= 0.5:
+            raise ParameterError(self.model_name, "nu", p.nu, "< 0.5")
+        needs_c = not self.on("hertz_contact") and p.c_contact == 0.0
+        needs_c0 = self.on("support_compliance") and p.c_support == 0.0
+        if (needs_c or needs_c0 or needs_V0) and p.V0 <= 0.0:
+            raise ParameterError(self.model_name, "V0", p.V0,
+                                 "> 0 m/s (start speed / speed of the stiffness iteration)")
+        if needs_c0 and p.k_n <= 0.0:
+            raise ParameterError(self.model_name, "k_n", p.k_n,
+                                 "> 0 when support_compliance is on and c_support = 0")
+        if self.on("hertz_support") and not self.on("support_compliance"):
+            raise ParameterError(self.model_name, "effect_hertz_support", True,
+                                 "only with effect support_compliance (a pinned pivot has no "
+                                 "bearing law)")
+        if self.on("hertz_support") and p.k_n <= 0.0:
+            raise ParameterError(self.model_name, "k_n", p.k_n, "> 0 with effect hertz_support")
+
+    # -- helpers ---------------------------------------------------------------------------
+    @property
+    def compliant(self) -> bool:
+        return self.on("support_compliance")
+
+    @property
+    def hertz(self) -> bool:
+        return self.on("hertz_contact")
+
+    @property
+    def gap(self) -> float:
+        return 0.0 if self.p.strike_at_start == 1.0 else self.p.tool_gap
+
+    def data(self, flange_J: float = 0.0) -> RockerData:
+        p = self.p
+        return RockerData(J=p.J + flange_J, m=p.m, r=p.r, S=p.S, R_c=p.R_c, d=p.d, E=p.E,
+                          rho=p.rho, nu=p.nu, V0=p.V0, k_n=p.k_n)
+
+    @property
+    def Z(self) -> float:
+        return self.data().Z
+
+    @property
+    def K(self) -> float:
+        return self.data().K
+
+    def _fresh_discrete(self, c, c0, contact):
+        return {"contact": bool(contact), "n_impacts": 1 if contact else 0, "P_peak": 0.0,
+                "T_peak": 0.0, "c": c, "c0": c0, "V_impact": 0.0}
+
+    def _split(self, x):
+        """(u0, v0, theta, omega, w, impulse, E_rad, t_contact) whatever the effects."""
+        if self.compliant:
+            return tuple(x[:8])
+        return (0.0, 0.0) + tuple(x[:6])
+
+    def delta(self, x) -> float:
+        u0, _, th, _, w, _, _, _ = self._split(x)
+        return u0 + self.p.S * th - w - self.gap
+
+    def contact_force(self, delta: float) -> float:
+        """P for the deflection delta, in contact mode: the smooth extension (c delta, or
+        K |delta|^1.5 sign(delta)) so the integrator sees a smooth right side up to the event."""
+        if self.hertz:
+            return self._K * math.copysign(abs(delta) ** 1.5, delta)
+        return self._d["c"] * delta
+
+    def _force(self, x) -> float:
+        return self.contact_force(self.delta(x)) if self._d["contact"] else 0.0
+
+    def _accelerations(self, x, u, P):
+        """(u0'', theta'', T) with the drive torque u[0] and inertia u[1] on the rocker shaft."""
+        return self._rocker_accelerations(x, P, u[0], self.p.J + u[1])
+
+    def _support_force(self, u0: float, v0: float) -> float:
+        """T of the elastic support at displacement u0, speed v0."""
+        return self._spring(u0)
+
+    def _spring(self, u0: float) -> float:
+        """The bearing's spring force: c0 u0, or kappa |u0|^1.5 sgn(u0) (hertz_support)."""
+        if self._hertz_support:
+            return self._kappa * math.copysign(abs(u0) ** 1.5, u0)
+        return self._d["c0"] * u0
+
+    def spring_rate(self, u0: float) -> float:
+        """dT/du0 of the bearing's spring."""
+        return 1.5 * self._kappa * math.sqrt(abs(u0)) if self._hertz_support else self._d["c0"]
+
+    def _spring_energy(self, u0: float) -> float:
+        if self._hertz_support:
+            return 0.4 * self._kappa * abs(u0) ** 2.5
+        return 0.5 * self._d["c0"] * u0 * u0
+
+    def _rocker_accelerations(self, x, P, torque, J_t, F_axis=0.0):
+        """(u0'', theta'', T) for the contact force P, a torque on the rocker about the pivot,
+        the inertia J_t about the pivot and a further force F_axis on the rocker along the tool
+        axis (toward the tool). Pinned: T = -P - m r theta'' + F_axis is the pivot reaction."""
+        p = self.p
+        if self.compliant:
+            u0, v0 = self._split(x)[:2]
+            T = self._support_force(u0, v0)
+            det = p.m * (J_t - p.m * p.r ** 2)
+            f1, f2 = -P - T + F_axis, -P * p.S + torque
+            return (J_t * f1 - p.m * p.r * f2) / det, (p.m * f2 - p.m * p.r * f1) / det, T
+        ddth = (-P * p.S + torque) / J_t
+        return 0.0, ddth, -P - p.m * p.r * ddth + F_axis
+
+    def support_force(self, x, u) -> float:
+        return self._accelerations(x, u, self._force(x))[2]
+
+    def mechanical_energy(self, x, u) -> float:
+        """Kinetic energy of rocker (+ drive inertia) + support and contact potential energy."""
+        p = self.p
+        u0, v, _, om, _, _, _, _ = self._split(x)
+        J_t = p.J + u[1]
+        E = 0.5 * p.m * v * v + p.m * p.r * v * om + 0.5 * J_t * om * om
+        if self.compliant:
+            E += self._spring_energy(u0)
+        if self._d["contact"]:
+            dl = max(self.delta(x), 0.0)
+            E += 0.4 * self._K * dl ** 2.5 if self.hertz else 0.5 * self._d["c"] * dl * dl
+        return E
+
+    @property
+    def _K(self) -> float:
+        K = getattr(self, "_K_cache", None)
+        if K is None:
+            K = self._K_cache = self.K
+        return K
+
+    def state_nominal(self) -> np.ndarray:
+        """Typical magnitudes (atol = rtol * nominal): lengths V0 * 0.1 ms, speeds V0, impulse
+        and energy of a 10 kg mass at V0, time 1 ms."""
+        V = max(self.p.V0, 1.0)
+        L, S = V * 1e-4, self.p.S
+        scale = [L, V, L / S, V / S, L, 10.0 * V, 5.0 * V * V, 1e-3]
+        return np.array(scale if self.compliant else scale[2:])
+
+    # -- contract --------------------------------------------------------------------------
+    def state_names(self):
+        rocker = ("theta", "omega", "w_tool", "impulse", "E_radiated", "t_contact")
+        return (("u0", "v0") + rocker) if self.compliant else rocker
+
+    def stiffnesses(self, flange_J: float = 0.0) -> tuple[float, float | None]:
+        """(c, c0) in use: parameters if given, else the paper's iterations (c0 None: pinned)."""
+        p = self.p
+        c = 0.0 if self.hertz else p.c_contact
+        c0 = p.c_support if self.compliant else None
+        if (c == 0.0 and not self.hertz) or c0 == 0.0:
+            try:
+                lin = linearise(self.data(flange_J), pinned=not self.compliant,
+                                rtol=p.iteration_tol, c0=c0 or None)
+            except AnalysisError as err:
+                raise ParameterError(self.model_name, "c_support", p.c_support,
+                                     f"> 0 N/m here: {err}") from err
+            c = lin.c if (c == 0.0 and not self.hertz) else c
+            c0 = lin.c0 if c0 == 0.0 else c0
+        return float(c), (None if c0 is None else float(c0))
+
+    def initial_state(self, u):
+        p = self.p
+        self._K_cache, self._Z_cache = self.K, self.Z   # parameters are fixed from here on
+        c, c0 = self.stiffnesses(float(u[1]))
+        if p.strike_at_start == 1.0:
+            theta, omega = 0.0, p.V0 / p.S
+        else:
+            theta, omega = p.theta_start, p.w_start
+        x = np.array(([0.0, 0.0] if self.compliant else []) + [theta, omega, 0.0, 0.0, 0.0, 0.0])
+        d0 = p.S * theta - self.gap
+        touching = d0 > 0.0 or (d0 == 0.0 and omega > 0.0)
+        self._d = self._fresh_discrete(c, c0, touching)
+        if touching:
+            self._d["V_impact"] = float(p.S * omega)
+        return x
+
+    def derivatives(self, t, x, u):
+        P = self._force(x)
+        ddu, ddth, _ = self._accelerations(x, u, P)
+        _, v, _, om, _, _, _, _ = self._split(x)
+        Z = self._Z
+        rocker = [om, ddth, P / Z, P, P * P / Z, 1.0 if self._d["contact"] else 0.0]
+        return ([v, ddu] + rocker) if self.compliant else rocker
+
+    @property
+    def _Z(self) -> float:
+        Z = getattr(self, "_Z_cache", None)
+        if Z is None:
+            Z = self._Z_cache = self.Z
+        return Z
+
+    def output_values(self, t, x, u):
+        out = self._output_dict(t, x, u)
+        return np.array([out[v.name] for v in self.outputs], dtype=float)
+
+    def _output_dict(self, t, x, u) -> dict:
+        d = self._d
+        P = max(self._force(x), 0.0)
+        T = self._accelerations(x, u, P)[2]
+        u0, v0, th, om, _, imp, E_rad, duration = self._split(x)
+        P_peak, T_peak = d["P_peak"], d["T_peak"]
+        if d["contact"]:
+            P_peak, T_peak = max(P_peak, P), max(T_peak, abs(T))
+        return {"flange_w": om, "flange_phi": th, "P": P, "T": T,
+                "contact": 1.0 if d["contact"] else 0.0, "impulse": imp, "E_radiated": E_rad,
+                "P_peak": P_peak, "T_peak": T_peak, "impact_duration": duration,
+                "n_impacts": float(d["n_impacts"]), "c_contact_used": d["c"] or 0.0,
+                "c_support_used": 0.0 if self._hertz_support else d["c0"] or 0.0,
+                "V_impact": d.get("V_impact", 0.0),
+                "u_support": u0, "v_support": v0, "E_mech": self.mechanical_energy(x, u)}
+
+    # -- hybrid part -----------------------------------------------------------------------
+    def event_functions(self, u_of_t):
+        """The mode switch: contact begins (delta rises through 0) or ends (falls to 0)."""
+        def switch(t, x):
+            return self.delta(x)
+        switch.terminal = True
+        switch.direction = -1.0 if self._d["contact"] else 1.0
+        return [switch]
+
+    def monitor_functions(self, u_of_t):
+        """Non-terminal events located during contact for the exact peaks: delta' = 0 (P' = 0)
+        and, with the elastic support, u0' = 0 (T' = 0)."""
+        if not self._d["contact"]:
+            return []
+
+        def p_peak(t, x):
+            _, v, _, om, _, _, _, _ = self._split(x)
+            return v + self.p.S * om - self._force(x) / self._Z
+        p_peak.terminal, p_peak.direction = False, -1.0
+        if not self.compliant:
+            return [p_peak]
+
+        def t_extremum(t, x):
+            return x[1]
+        t_extremum.terminal, t_extremum.direction = False, 0.0
+        return [p_peak, t_extremum]
+
+    def observe(self, t, x, u) -> None:
+        """Fold P and |T| at (t, x) into the peaks of the ongoing impact."""
+        d = self._d
+        if not d["contact"]:
+            return
+        P = max(self._force(x), 0.0)
+        T = self._accelerations(x, u, P)[2]
+        d["P_peak"] = max(d["P_peak"], P)
+        d["T_peak"] = max(d["T_peak"], abs(T))
+
+    def on_event(self, t, x, u, index):
+        d = self._d
+        x = np.array(x, dtype=float)
+        if d["contact"]:          # end of contact: P returned to zero
+            self.observe(t, x, u)
+            d["contact"] = False
+        else:                     # contact begins: a new impact, fresh statistics
+            _, v0, _, om, _, _, _, _ = self._split(x)
+            d.update(contact=True, n_impacts=d["n_impacts"] + 1, P_peak=0.0, T_peak=0.0,
+                     V_impact=float(v0 + self.p.S * om))
+            names = self.state_names()
+            x[names.index("impulse")] = x[names.index("t_contact")] = 0.0
+            self.observe(t, x, u)
+        return x
+
+    def discrete_state(self) -> dict:
+        return dict(self._d)
+
+    def set_discrete_state(self, state: dict) -> None:
+        self._d = dict(state)
+
+    def advance(self, t0, x0, h, u_of_t, rtol, atol):
+        """Integrate from t0 to t0 + h with the mode switches as terminal events and the force
+        extrema as non-terminal events that do not restart the integrator."""
+        if h <= 0.0:
+            return list(x0)
+        t, x, t_end = t0, x0, t0 + h
+        for _ in range(self.max_events_per_step):
+            switch = self.event_functions(u_of_t)
+            sol = self.integrate(u_of_t, t, x, t_end, rtol, atol,
+                                 switch + self.monitor_functions(u_of_t))
+            for _, te, xe in sol.crossings:
+                self.observe(te, xe, u_of_t(te))
+            if sol.status == 0:
+                self.observe(t_end, sol.x, u_of_t(t_end))
+                return sol.x
+            t = sol.t
+            x = self.on_event(t, sol.x, u_of_t(t), 0)
+            if t >= t_end:
+                return list(x)
+        raise IntegrationError(f"{self.model_name}: more than {self.max_events_per_step} "
+                               f"contact changes in one step at t = {t:.9g} s (chattering)")

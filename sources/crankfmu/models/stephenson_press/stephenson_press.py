@@ -1,0 +1,257 @@
+"""Stephenson six-bar crank press (seed stephenson_press_servo_drive, eq. 1-3, 21-22).
+
+Coordinates: x horizontal, y downward, crank centre O at the origin. The crank pin A is at
+(r cos phi, r sin phi); the base link 2 has its centre at A and moves in circular translation;
+the two parallel rods 3, 4 (length l) join it to the slider 5 on the vertical through O:
+
+    cos psi = -r cos(phi)/l,  sin psi = +sqrt(1 - cos^2 psi)   (rod angle, 0 < psi < pi)
+    S   = r sin(phi) + l sin(psi)                              (slider, BDC at phi = pi/2)
+    psi'  = -(r/l) sin(phi)/sin(psi)
+    psi'' = -[(r/l) cos(phi) + psi'^2 cos(psi)]/sin(psi)       (printed eq. 3 has a sign error)
+    S'  = r cos(phi) + l psi' cos(psi)
+    S'' = -r sin(phi) - l psi'^2 sin(psi) + l psi'' cos(psi)
+
+Reduced inertia and its derivative (eq. 2, 22; ' is d/dphi):
+    J(phi)    = J_c + m5 S'^2 [+ rods],   J_c = i^2 J_input + J1 + m2 r^2
+    J'(phi)/2 = m5 S' S''     [+ rods]
+Rods (effect rod_inertia): two uniform bars with centre C = (r cos(phi)/2, r sin(phi) + (l/2) sin psi),
+each adding m_rod |C'|^2 + (m_rod l^2/12) psi'^2 to J and m_rod C'.C'' +
+(m_rod l^2/12) psi' psi'' to J'/2.
+
+Motion (eq. 1):  J(phi) phi'' + J'(phi)/2 phi'^2 = i M_D + M_C(phi)
+    M_C = (G5 - F5) S' + G2 r cos(phi) [+ 2 m_rod g y_C']  (gravity terms: effect gravity)
+Forging force (effect forging_load): F5 = F_max sin(pi x/forging_angle) for
+x = phi - (pi/2 - forging_angle) (mod 2 pi) in [0, forging_angle], else 0 (the window ends at BDC).
+The window's edges are kinks of M_C: they are events (the integrator stops and restarts there).
+
+Rigid coupling to a driving member that integrates the shaft itself (effect driven_crank; e.g. the
+carrier of PlanetaryClutchDrive, docs/models/planetary_drive.md section 6): the press then has no
+states; its input shaft follows the inputs shaft_phi, shaft_w (phi = phi_start + shaft_phi/i,
+phi' = shaft_w/i) and it returns what the shaft must carry, the two terms of eq. (1) that are not
+the acceleration's:
+    shaft_J   = J(phi)/i^2                           (added to the driver's inertia)
+    shaft_tau = (M_C(phi) - J'(phi)/2 phi'^2)/i      (added to the driver's torques)
+so the driver integrates J(phi) phi'' + J'/2 phi'^2 = i M_D + M_C exactly as the press would, with
+the driving torque M_D now an internal force of the rigid shaft. The outputs shaft_tau/shaft_J are
+also given in the default (integrating) mode, from the press's own state.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ...runtime.model import Effect, ParameterError, PhysicsModel, Variable
+
+G_STANDARD = 9.80665  # m/s^2
+EDGE_BAND = 1e-12      # rad per rad of |phi|: an edge this close to the restart was just passed
+
+
+class StephensonPress(PhysicsModel):
+    model_name = "StephensonPress"
+    description = "Stephenson six-bar crank press: one-DOF reduced dynamics of the crank"
+    seed = "stephenson_press_servo_drive.txt, eq. (1)-(3), (21)-(22)"
+    integrator = "DOP853"
+
+    parameters = (
+        Variable("r", "m", "Crank radius", 0.05, min=0.0),
+        Variable("l", "m", "Length of the parallel rods 3 and 4 (must exceed r)", 0.25, min=0.0),
+        Variable("J1", "kg.m2", "Crank inertia about O", 2.0, min=0.0),
+        Variable("m2", "kg", "Mass of base link 2 (centre at hinge A)", 20.0, min=0.0),
+        Variable("m5", "kg", "Slider mass", 50.0, min=0.0),
+        Variable("m_rod", "kg", "Mass of each rod (used with effect rod_inertia)", 5.0, min=0.0),
+        Variable("gear_ratio", "1", "Gear ratio i = motor speed / crank speed", 10.0, min=0.0),
+        Variable("F_max", "N", "Forging force amplitude (effect forging_load)", 50e3, min=0.0),
+        Variable("forging_angle", "rad", "Crank angle of the forging window ending at BDC",
+                 math.radians(30.0), min=0.0, max=2 * math.pi),
+        Variable("g", "m/s2", "Gravitational acceleration (effect gravity)", G_STANDARD, min=0.0),
+        Variable("phi_start", "rad", "Crank angle at the start time", 0.0),
+        Variable("w_start", "rad/s", "Crank angular velocity at the start time", 0.0),
+    )
+    effects = (
+        Effect("gravity", "Weights of slider, base link (and rods) in M_C"),
+        Effect("forging_load", "Half-sine forging force on the slider over the window"),
+        Effect("rod_inertia", "Mass and inertia of the two rods in J(phi) and M_C"),
+        Effect("driven_crank", "No states: the input shaft follows shaft_phi/shaft_w of a rigidly "
+               "coupled driver, which takes shaft_tau and shaft_J (rigid coupling)"),
+    )
+    inputs = (
+        Variable("flange_tau", "N.m", "Drive torque M_D on the motor shaft", 0.0),
+        Variable("flange_J", "kg.m2", "Inertia rigidly on the motor shaft (J_input)", 0.0,
+                 min=0.0),
+        Variable("shaft_phi", "rad", "Input shaft angle i*(phi - phi_start) from the driver "
+                 "(effect driven_crank)", 0.0),
+        Variable("shaft_w", "rad/s", "Input shaft angular velocity i*phi' from the driver "
+                 "(effect driven_crank)", 0.0),
+    )
+    _driven = ("shaft_phi", "shaft_w")  # feedthrough with effect driven_crank only
+    outputs = (
+        Variable("flange_w", "rad/s", "Motor shaft angular velocity i*phi'", depends_on=_driven),
+        Variable("flange_phi", "rad", "Motor shaft angle i*phi", depends_on=_driven),
+        Variable("phi", "rad", "Crank angle (continuous, not wrapped)", depends_on=_driven),
+        Variable("w_crank", "rad/s", "Crank angular velocity phi'", depends_on=_driven),
+        Variable("slider_s", "m", "Slider position S, downward, r + l at BDC",
+                 depends_on=_driven),
+        Variable("slider_v", "m/s", "Slider velocity S' phi'", depends_on=_driven),
+        Variable("F5", "N", "Forging force on the slider", depends_on=_driven),
+        Variable("J_reduced", "kg.m2", "Reduced inertia J(phi) at the crank",
+                 depends_on=("flange_J",) + _driven),
+        Variable("M_C", "N.m", "Reduced resistance moment M_C(phi) at the crank",
+                 depends_on=_driven),
+        Variable("shaft_tau", "N.m", "Torque of the press on its input shaft apart from inertia, "
+                 "(M_C - J'/2 phi'^2)/i (for a rigidly coupled driver)", depends_on=_driven),
+        Variable("shaft_J", "kg.m2", "Press inertia at its input shaft J(phi)/i^2 (for a rigidly "
+                 "coupled driver)", depends_on=("flange_J",) + _driven),
+    )
+
+    def check(self, p):
+        if p.r <= 0.0:
+            raise ParameterError(self.model_name, "r", p.r, "> 0 m")
+        if p.l <= p.r:
+            raise ParameterError(self.model_name, "l", p.l,
+                                 f"> r = {p.r} m (a rod shorter than the crank cannot assemble)")
+        if p.gear_ratio <= 0.0:
+            raise ParameterError(self.model_name, "gear_ratio", p.gear_ratio, "> 0")
+        if self.on("forging_load") and p.forging_angle <= 0.0:
+            raise ParameterError(self.model_name, "forging_angle", p.forging_angle,
+                                 "> 0 rad when effect forging_load is on")
+
+    def __init__(self, parameters=None, effects=None):
+        super().__init__(parameters, effects)
+        # the effect switches, read in every right-hand-side call
+        self._driven, self._forging = self.on("driven_crank"), self.on("forging_load")
+        self._gravity, self._rods = self.on("gravity"), self.on("rod_inertia")
+        self._edge_events = (None, [])  # (edges, their event functions): see event_functions
+        p = self.p  # r, l, r/l, i^2, J1 + m2 r^2 (base link in circular translation), m5
+        self._constants = (p.r, p.l, p.r / p.l, p.gear_ratio ** 2, p.J1 + p.m2 * p.r ** 2, p.m5)
+
+    # -- the equations: one scalar core -----------------------------------------------------
+    # The right-hand side calls `crank_terms` on floats (math: ~20x cheaper than numpy on one
+    # value); the public functions below take a scalar or an array phi and reach the same core
+    # (np.vectorize for arrays: the analyses' grids), so each equation is written once.
+    def crank_terms(self, phi: float, J_input: float) -> tuple[float, ...]:
+        """(J, J'/2, M_C, F5, S, S', S'', psi, psi', psi'') at one crank angle: eq. (1)-(3),
+        (21)-(22). One function, not one per quantity: the right-hand side calls it 7 times per
+        step, and in Python the calls would cost as much as the arithmetic."""
+        p = self.p
+        r, l, r_l, i2_, J_fixed, m5 = self._constants
+        sin_phi, cos_phi = math.sin(phi), math.cos(phi)
+        cos_psi = -r_l * cos_phi
+        sin_psi = math.sqrt(1.0 - cos_psi * cos_psi)
+        dpsi = -r_l * sin_phi / sin_psi
+        ddpsi = -(r_l * cos_phi + dpsi * dpsi * cos_psi) / sin_psi
+        S = r * sin_phi + l * sin_psi
+        dS = r * cos_phi + l * dpsi * cos_psi
+        ddS = -r * sin_phi - l * dpsi * dpsi * sin_psi + l * ddpsi * cos_psi
+        J = i2_ * J_input + J_fixed + m5 * dS * dS
+        half_dJ = m5 * dS * ddS
+        F5 = 0.0
+        if self._forging:  # half sine over the window ending at BDC
+            x = (phi - (0.5 * math.pi - p.forging_angle)) % (2 * math.pi)
+            if x <= p.forging_angle:
+                F5 = p.F_max * math.sin(math.pi * x / p.forging_angle)
+        M_C = -F5 * dS
+        if self._gravity:
+            M_C += m5 * p.g * dS + p.m2 * p.g * r * cos_phi
+        if self._rods:  # two uniform bars, centre C; C' and C'' as functions of phi
+            dCx, dCy = -0.5 * r * sin_phi, r * cos_phi + 0.5 * l * cos_psi * dpsi
+            ddCx = -0.5 * r * cos_phi
+            ddCy = -r * sin_phi + 0.5 * l * (ddpsi * cos_psi - dpsi * dpsi * sin_psi)
+            J_rod = p.m_rod * l * l / 12.0
+            J += 2.0 * (p.m_rod * (dCx * dCx + dCy * dCy) + J_rod * dpsi * dpsi)
+            half_dJ += 2.0 * (p.m_rod * (dCx * ddCx + dCy * ddCy) + J_rod * dpsi * ddpsi)
+            if self._gravity:
+                M_C += 2.0 * p.m_rod * p.g * dCy
+        return (J, half_dJ, M_C, F5, S, dS, ddS, math.atan2(sin_psi, cos_psi), dpsi, ddpsi)
+
+    def kinematics(self, phi):
+        """(S, S', S'', psi, psi', psi'') for scalar or array phi."""
+        return _over(lambda a: self.crank_terms(a, 0.0)[4:], phi, 6)
+
+    def reduced_inertia(self, phi, J_input: float):
+        """(J(phi), J'(phi)/2) at the crank."""
+        return _over(lambda a: self.crank_terms(a, J_input)[:2], phi, 2)
+
+    def resistance_moment(self, phi):
+        """M_C(phi) at the crank: forging force and weights (their generalized forces)."""
+        return _over(lambda a: self.crank_terms(a, 0.0)[2], phi, 1)
+
+    def forging_force(self, phi):
+        return _over(lambda a: self.crank_terms(a, 0.0)[3], phi, 1)
+
+    def J_constant(self, J_input: float) -> float:
+        """J_c = i^2 J_input + J1 + m2 r^2 (base link in circular translation, eq. 21-22)."""
+        i2_, J_fixed = self._constants[3:5]
+        return i2_ * J_input + J_fixed
+
+    # -- contract --------------------------------------------------------------------------
+    def state_names(self):
+        return () if self.on("driven_crank") else ("phi", "w_crank")
+
+    def initial_state(self, u):
+        if self.on("driven_crank"):
+            return []
+        return [self.p.phi_start, self.p.w_start]
+
+    def crank_motion(self, x, u) -> tuple[float, float]:
+        """(phi, phi'): the states, or with driven_crank the driver's shaft over the gear."""
+        if self.on("driven_crank"):
+            i = self.p.gear_ratio
+            return self.p.phi_start + u[2] / i, u[3] / i
+        return x[0], x[1]
+
+    def shaft_load(self, phi, w, J_input: float = 0.0) -> tuple[float, float]:
+        """(shaft_tau, shaft_J) at the input shaft for crank angle phi and speed w = phi'."""
+        i = self.p.gear_ratio
+        J, half_dJ, M_C = self.crank_terms(phi, J_input)[:3]
+        return (M_C - half_dJ * w * w) / i, J / (i * i)
+
+    def derivatives(self, t, x, u):
+        if self._driven:
+            return ()
+        phi, w = x
+        J, half_dJ, M_C = self.crank_terms(phi, u[1])[:3]
+        return (w, (self.p.gear_ratio * u[0] + M_C - half_dJ * w * w) / J)
+
+    def event_functions(self, u_of_t):
+        """The forging window's edges (phi = start and start + forging_angle, mod 2 pi), where
+        M_C has a kink: the integrator stops there and restarts, instead of stepping across.
+        Two events: the next edge ahead of the restart angle (crossed upwards) and the last one
+        behind it (crossed downwards, if the crank turns back); an edge within EDGE_BAND of the
+        restart angle is the one just passed and does not count."""
+        if not self._forging or self._driven:
+            return []
+        phi = self.restart_state[0]
+        band = EDGE_BAND * max(1.0, abs(phi))
+        cached = self._edge_events[0]
+        if cached and cached[1] + band < phi < cached[0] - band:
+            return self._edge_events[1]
+        start = 0.5 * math.pi - self.p.forging_angle
+        edges = [e + 2 * math.pi * k for k in (math.floor((phi - start) / (2 * math.pi)) + j
+                                              for j in (-1, 0, 1))
+                 for e in (start, start + self.p.forging_angle)]
+        pair = (min(e for e in edges if e > phi + band), max(e for e in edges if e < phi - band))
+        self._edge_events = (pair, [_crossing(pair[0], +1), _crossing(pair[1], -1)])
+        return self._edge_events[1]
+
+    def output_values(self, t, x, u):
+        phi, w = self.crank_motion(x, u)
+        i = self.p.gear_ratio
+        J, half_dJ, M_C, F5, S, dS = self.crank_terms(phi, u[1])[:6]
+        return [i * w, i * phi, phi, w, S, dS * w, F5, J, M_C, (M_C - half_dJ * w * w) / i,
+                J / (i * i)]
+
+
+def _crossing(angle: float, direction: int):
+    """A terminal event where phi crosses `angle` in `direction`."""
+    def g(t, x):
+        return x[0] - angle
+    g.terminal, g.direction = True, direction
+    return g
+
+
+def _over(scalar_function, phi, n_out: int):
+    """scalar_function at a scalar phi, or elementwise over an array (tuples of arrays)."""
+    if isinstance(phi, (float, int)):
+        return scalar_function(float(phi))
+    return np.vectorize(scalar_function, otypes=[float] * n_out)(np.asarray(phi, dtype=float))

@@ -1,1 +1,0 @@
-"""FMI plumbing: one generic pythonfmu adapter serves every physics model."""

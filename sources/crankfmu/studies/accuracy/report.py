@@ -1,0 +1,88 @@
+"""The accuracy sweep's outputs: terminal table, CSV, work-precision plot."""
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+
+from .sweep import Outcome
+
+COLUMNS = ("algorithm", "extrapolation", "step_s", "fmu_tolerance", "tolerance", "error",
+           "wall_s", "doStep_calls", "rollbacks", "communication_steps", "status")
+
+
+def _row(o: Outcome) -> list:
+    s = o.setting
+    return [s.algorithm, s.extrapolation, s.step, s.fmu_tolerance, s.tolerance, o.error,
+            o.wall_seconds, o.do_steps, o.rollbacks, o.communication_steps, o.status]
+
+
+def write_table_csv(path: Path, outcomes: list[Outcome], metric: str) -> None:
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["metric"] + list(COLUMNS))
+        for o in outcomes:
+            w.writerow([metric] + _row(o))
+
+
+def format_table(outcomes: list[Outcome]) -> str:
+    head = (f"{'algorithm':<13} {'ex':>2} {'step [s]':>9} {'fmu tol':>7} {'tol':>7} "
+            f"{'error [1]':>10} {'wall [s]':>8} {'doSteps':>8} {'rollb.':>6}  status")
+    lines = [head, "-" * len(head)]
+    for o in outcomes:
+        s = o.setting
+        status = o.status if len(o.status) < 60 else o.status[:57] + "..."
+        lines.append(f"{s.algorithm:<13} {s.extrapolation:>2} {s.step:>9.3g} "
+                     f"{s.fmu_tolerance:>7.0e} {s.tolerance:>7.0e} {o.error:>10.3e} "
+                     f"{o.wall_seconds:>8.3f} {o.do_steps:>8d} {o.rollbacks:>6d}  {status}")
+    return "\n".join(lines)
+
+
+def format_orders(orders: dict) -> str:
+    lines = ["observed order (slope of log error over log step; for a variable-step master over "
+             "log tolerance):"]
+    for (alg, ex, ft), (order, used, knob) in orders.items():
+        text = f"{order:.2f}" if math.isfinite(order) else "n/a"
+        lines.append(f"  {alg:<13} extrapolation {ex}  fmu tol {ft:.0e}: {text} "
+                     f"(vs {knob}, {used} points above the floor)")
+    return "\n".join(lines)
+
+
+def plot_work_precision(path: Path, outcomes: list[Outcome], metric_text: str,
+                        target: float | None, title: str) -> None:
+    """Error against wall time (left) and against doStep calls (right), log-log, one line per
+    master / extrapolation / FMU tolerance."""
+    from ...cosim.results import PALETTE, new_figure
+
+    groups: dict[tuple, list[Outcome]] = {}
+    for o in outcomes:
+        if o.ok and o.error > 0 and o.wall_seconds > 0:
+            s = o.setting
+            groups.setdefault((s.algorithm, s.extrapolation, s.fmu_tolerance), []).append(o)
+    several_ft = len({k[2] for k in groups}) > 1
+    fig = new_figure(figsize=(12, 5.5))
+    axes = fig.subplots(1, 2, sharey=True)
+    # colour per master, line style and marker per extrapolation order
+    masters = sorted({k[0] for k in groups})
+    colours = {m: PALETTE[i % len(PALETTE)] for i, m in enumerate(masters)}
+    styles = {0: ("-", "o"), 1: ("--", "s"), 2: (":", "^")}
+    for key, group in sorted(groups.items()):
+        # along the knob (coarse to fine), so timing noise shows as noise, not as a new order
+        group.sort(key=lambda o: -o.knob_value)
+        label = f"{key[0]}, extrapolation {key[1]}" + (f", fmu tol {key[2]:.0e}" if several_ft
+                                                       else "")
+        ls, marker = styles.get(key[1], ("-.", "D"))
+        style = dict(color=colours[key[0]], ls=ls, marker=marker, lw=1.2, ms=5, label=label)
+        axes[0].loglog([o.wall_seconds for o in group], [o.error for o in group], **style)
+        axes[1].loglog([o.do_steps for o in group], [o.error for o in group], **style)
+    for ax in axes:
+        if target:
+            ax.axhline(target, color="k", ls="--", lw=0.8, label=f"target {target:g}")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].set_xlabel("wall time of the run [s]")
+    axes[1].set_xlabel("doStep calls, all FMUs [1] (timing-free)")
+    axes[0].set_ylabel("error [1]")
+    axes[1].legend(fontsize=7)
+    fig.suptitle(f"{title}\nerror = {metric_text}", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
