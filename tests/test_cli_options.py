@@ -119,7 +119,7 @@ def test_a_build_names_its_sources_and_warns_when_the_tree_differs(tmp_path, cap
                     ignore=shutil.ignore_patterns("__pycache__"))
     assert tree_differences(tree / "sources" / "crankfmu") == []
     assert tree_differences(PACKAGE_DIR) == []  # the package itself
-    motor = tree / "sources" / "crankfmu" / "physics" / "dc_motor.py"
+    motor = tree / "sources" / "crankfmu" / "models" / "dc_motor" / "dc_motor.py"
     motor.write_text(motor.read_text() + "# an edit\n")
     assert tree_differences(tree / "sources" / "crankfmu") == ["models/dc_motor/dc_motor.py"]
     setup_logging(0)

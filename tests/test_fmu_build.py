@@ -49,3 +49,34 @@ def test_building_twice_gives_identical_files(tmp_path):
     with zipfile.ZipFile(first) as a, zipfile.ZipFile(second) as b:
         assert a.read("modelDescription.xml") == b.read("modelDescription.xml")
     assert first.read_bytes() == second.read_bytes()
+
+
+def test_an_fmu_bundles_the_runtime_and_its_model_folder_only(fmu_dir):
+    """StephensonPress.fmu: runtime/ and models/stephenson_press/, nothing of the catalog, the
+    other models, the analyses or the runner (they would be dead weight and rebuild causes)."""
+    from crankfmu.fmu.build import PACKAGE_DIR
+    with zipfile.ZipFile(fmu_dir / "StephensonPress.fmu") as z:
+        bundled = {n.split("/", 2)[2] for n in z.namelist()
+                   if n.startswith("resources/crankfmu_rt_") and n.endswith(".py")}
+    expected = {p.relative_to(PACKAGE_DIR).as_posix() for folder in ("runtime",
+                "models/stephenson_press") for p in (PACKAGE_DIR / folder).glob("*.py")}
+    assert bundled == expected | {"__init__.py", "models/__init__.py"}
+
+
+def test_an_edit_to_one_model_changes_only_its_build_id(tmp_path, monkeypatch):
+    """Per-model digests: a copy of the sources with dc_motor.py edited gives DcServoMotor a new
+    build id and leaves StephensonPress's as it was."""
+    import shutil
+
+    from crankfmu.fmu import build
+    copy = tmp_path / "crankfmu"
+    shutil.copytree(build.PACKAGE_DIR, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    motor = copy / "models" / "dc_motor" / "dc_motor.py"
+    motor.write_text(motor.read_text() + "# an edit\n")
+    before = {m: build.sources_digest(build.runtime_files(m))
+              for m in ("DcServoMotor", "StephensonPress")}
+    monkeypatch.setattr(build, "PACKAGE_DIR", copy)
+    after = {m: build.sources_digest(build.runtime_files(m))
+             for m in ("DcServoMotor", "StephensonPress")}
+    assert after["DcServoMotor"] != before["DcServoMotor"]
+    assert after["StephensonPress"] == before["StephensonPress"]

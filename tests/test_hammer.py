@@ -1,6 +1,6 @@
 """Rocker impact scenes through the FMUs and the runner: the MO-100 single impact
 (scenarios/mo100_impact.toml) and the crank-rocker hammer (scenarios/hammer.toml,
-hammer_bearings.toml). Model cards: docs/models/rocker_impact.md, docs/models/crank_rocker.md.
+hammer_bearings.toml). Model cards: sources/crankfmu/models/rocker_impact/README.md, sources/crankfmu/models/rocker_impact/crank_rocker.md.
 Run with -s to print the measured figures."""
 from __future__ import annotations
 

@@ -3,7 +3,7 @@
 The paper linearises the rocker's support as c0 = k_n Tm^(1/3); the bearing itself follows the
 Hertz law T = kappa |u0|^1.5 sgn(u0), kappa = (k_n/1.25)^1.5. With both hertz_contact and
 hertz_support on, the MO-100 impact (k_n = 80e6, S = 1.1 J/(m r), V0 = 10 m/s) is solved here a
-second time, independently: the same equations (Lagrange, docs/models/rocker_impact.md) written
+second time, independently: the same equations (Lagrange, sources/crankfmu/models/rocker_impact/README.md) written
 out below and integrated by scipy's DOP853 at rtol 1e-12 with the peaks located as events, and
 compared with the model stepped as its FMU steps it (0.1 ms steps, the runtime's integrator at
 rtol 1e-10). Peak contact force and peak bearing load agree to 1e-6 relative (measured below

@@ -1,7 +1,7 @@
 """Master algorithms on a linear two-mass oscillator split over two FMUs, against its closed form.
 
 FMU r1 = Rotor (J1, spring c1 to ground; torque in, speed out), FMU r2 = ShaftRotor (shaft k, d_s
-and rotor J2; speed in, torque out): docs/models/rotor.md. With x = [phi1, w1, theta, phi2, w2]
+and rotor J2; speed in, torque out): sources/crankfmu/models/rotor/README.md. With x = [phi1, w1, theta, phi2, w2]
 the monolithic system is x' = A x, solved exactly by x(t) = expm(A t) x0. Both FMUs integrate
 their steps exactly (matrix exponential), so every error measured here is the coupling's.
 

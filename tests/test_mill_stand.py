@@ -190,7 +190,7 @@ def test_friction_loss_is_linear_in_the_mismatch():
 
 
 def test_friction_energy_per_revolution_closed_form():
-    """Over one revolution: E = 4 mu r_pin P (pi + 2 asin(r/l)) (docs/models/mill_stand.md)."""
+    """Over one revolution: E = 4 mu r_pin P (pi + 2 asin(r/l)) (sources/crankfmu/models/mill_stand/README.md)."""
     w0 = 2 * math.pi
     m = MillStandDrive({"rod_mismatch": 1e-4, "w_start": w0}, effects=["assembly_preload"])
     x = run(m, np.array([0.0, 1e9]), 1.0)

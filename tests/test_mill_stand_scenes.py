@@ -75,7 +75,7 @@ def cycles(fmus, tmp_path_factory):
 
 
 def closed_form_friction_per_revolution(scene_file="mill_stand.toml"):
-    """docs/models/mill_stand.md, section 5: 4 mu r_pin P (pi + 2 asin(r/l)), P = E A d/(2 l)."""
+    """sources/crankfmu/models/mill_stand/README.md, section 5: 4 mu r_pin P (pi + 2 asin(r/l)), P = E A d/(2 l)."""
     p = load_scene(SCENARIOS / scene_file).components["stand"].parameters
     P = p["E_rod"] * p["rod_area"] * p["rod_mismatch"] / (2.0 * p["l"])
     return 4.0 * p["mu_joint"] * p["r_pin"] * P * (math.pi + 2.0 * math.asin(p["r"] / p["l"]))

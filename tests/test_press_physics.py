@@ -3,7 +3,7 @@
 Every tolerance is stated with the figure measured when the test was written and why it is set
 where it is. The time-domain reference is the monolithic ODE of tests/servo_press_monolithic.py
 (DcServoMotor + StephensonPress composed, solve_ivp at rtol 1e-10). The measured figures are
-collected in docs/models/stephenson_press_analysis.md.
+collected in docs/stephenson_press_analysis.md.
 """
 from __future__ import annotations
 

@@ -123,7 +123,7 @@ def test_step_input_table_is_followed_exactly(tmp_path):
 def test_two_mass_oscillator_against_the_matrix_exponential(tmp_path):
     """Rotor (J1, torque in) and ShaftRotor (J2 behind a shaft k, d_s; speed in, torque out with
     feedthrough): x = [phi1, w1, theta, phi2, w2], x' = A x with A written here from the
-    equations of docs/models/rotor.md, solved by expm. Without damping the total energy is
+    equations of sources/crankfmu/models/rotor/README.md, solved by expm. Without damping the total energy is
     conserved. Solver at rtol 1e-10 over 10 periods: asserted 1e-8 relative."""
     J1, J2, k, d_s, w0 = 2.0, 0.5, 400.0, 0.3, 3.0
     scene = scene_from({
@@ -151,7 +151,7 @@ def test_two_mass_oscillator_against_the_matrix_exponential(tmp_path):
 
 
 def test_mill_stand_friction_per_revolution_matches_the_closed_form():
-    """docs/models/mill_stand.md section 5: pin friction per crank revolution
+    """sources/crankfmu/models/mill_stand/README.md section 5: pin friction per crank revolution
     4 mu r_pin P (pi + 2 asin(r/l)), P = E A d/(2 l), independent of the speed profile. Solver
     at rtol 1e-10 plus linear interpolation of E_friction in phi at the revolution ends (phi
     step 0.015 rad; the friction torque varies with the rod angle), which dominates: measured

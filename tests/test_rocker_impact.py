@@ -1,5 +1,5 @@
 """RockerImpact model and the paper's analysis (seed rocker_impact_unit; model card
-docs/models/rocker_impact.md).
+sources/crankfmu/models/rocker_impact/README.md).
 
 The MO-100 table is computed once (module fixture); the model runs through its own `advance`
 over coarse communication steps, as the FMU adapter calls it. Every tolerance has its reason in

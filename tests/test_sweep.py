@@ -272,7 +272,7 @@ def test_hybrid_scene_reports_its_event_figures(tmp_path, hybrid_fmus):
 
 def test_flywheel_report_marks_eq_28(tmp_path, servo_scene):
     """`crankfmu analyze flywheel`: eq. (28) from press_analysis, 0.1409 kg m^2 on the motor
-    shaft (docs/models/stephenson_press_analysis.md section 8); delta_1 falls with J_f and
+    shaft (docs/stephenson_press_analysis.md section 8); delta_1 falls with J_f and
     sqrt(26) is lowest at J_Mx."""
     from crankfmu.studies.flywheel import analytic, report
 

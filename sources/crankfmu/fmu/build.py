@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import functools
 import html
-import inspect
 import shutil
 import sys
 import tempfile
@@ -69,7 +68,7 @@ def runtime_files(model_name: str | None) -> list[tuple[str, bytes]]:
     model None, the runtime alone (an FMU whose model is in its entry script)."""
     paths = _package_files(PACKAGE_DIR / RUNTIME_DIR)
     if model_name is not None:
-        paths += _package_files(model_folder(model_name))
+        paths += _package_files(PACKAGE_DIR / "models" / model_folder(model_name))
         paths.append(PACKAGE_DIR / "models" / "__init__.py")
     names = sorted(path.relative_to(PACKAGE_DIR).as_posix() for path in paths)
     return [(name, (PACKAGE_DIR / name).read_bytes()) for name in names]
@@ -102,9 +101,17 @@ def _write_script(dest: Path, model_name: str, digest: str) -> Path:
     return script
 
 
+def model_card_files(model_name: str) -> list[Path]:
+    """The model's card: README.md of its folder, and <module>.md beside the class's module
+    where one model folder holds several FMU models (the hammer beside the rocker unit)."""
+    folder = PACKAGE_DIR / "models" / model_folder(model_name)
+    module = FMU_MODELS[model_name].split(":")[0].split(".")[-1]
+    return [path for path in (folder / "README.md", folder / f"{module}.md") if path.is_file()]
+
+
 def model_card_html(model_name: str) -> str:
-    """documentation/index.html: equations (the physics module's docstring), the derivations
-    in docs/models, and tables of parameters, effects, inputs and outputs with units."""
+    """documentation/index.html: the model card (models/<folder>/README.md) and a table of
+    parameters, effects, inputs and outputs with units."""
     cls = physics_class(model_name)
     rows = []
     for v in variable_table(cls):
@@ -112,18 +119,13 @@ def model_card_html(model_name: str) -> str:
         rows.append(f"<tr><td>{v.name}</td><td>{v.causality}</td><td>{v.unit or ''}</td>"
                     f"<td>{v.start if v.start is not None else ''}</td><td>{rng}</td>"
                     f"<td>{html.escape(v.description)}</td></tr>")
-    doc = inspect.getmodule(cls).__doc__ or ""
-    extra = ""
-    for path in sorted((PACKAGE_DIR.parents[1] / "docs" / "models").glob("*.md")):
-        if path.stem.replace("_", "") in model_name.lower() or \
-                model_name.lower().startswith(path.stem.split("_")[0]):
-            extra += f"<h2>{path.name}</h2><pre>{html.escape(path.read_text())}</pre>"
+    cards = "".join(f"<h2>{path.name}</h2><pre>{html.escape(path.read_text())}</pre>"
+                    for path in model_card_files(model_name))
     return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{model_name}</title>"
             f"</head><body><h1>{model_name}</h1><p>{html.escape(cls.description)}</p>"
-            f"<p>Source: seed {html.escape(cls.seed)}</p><h2>Equations</h2>"
-            f"<pre>{html.escape(doc)}</pre><h2>Variables</h2><table border='1'>"
-            "<tr><th>name</th><th>causality</th><th>unit</th><th>start</th><th>range</th>"
-            f"<th>description</th></tr>{''.join(rows)}</table>{extra}</body></html>")
+            f"<p>Source: seed {html.escape(cls.seed)}</p>{cards}<h2>Variables</h2>"
+            "<table border='1'><tr><th>name</th><th>causality</th><th>unit</th><th>start</th>"
+            f"<th>range</th><th>description</th></tr>{''.join(rows)}</table></body></html>")
 
 
 def _repack(built: Path, target: Path, model_name: str, slave_class, digest: str) -> None:

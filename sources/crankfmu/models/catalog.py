@@ -6,7 +6,6 @@ and its own folder, never another model's folder."""
 from __future__ import annotations
 
 import importlib
-from pathlib import Path
 
 from ..runtime.model import SCIPY_SOLVER, PhysicsModel
 
@@ -21,8 +20,6 @@ FMU_MODELS: dict[str, str] = {
     "Rotor": "rotor.rotor:Rotor",
     "ShaftRotor": "rotor.rotor:ShaftRotor",
 }
-MODELS_DIR = Path(__file__).resolve().parent
-
 
 def _entry(model_name: str) -> tuple[str, str]:
     try:
@@ -38,9 +35,9 @@ def physics_class(model_name: str):
     return getattr(importlib.import_module(f"{__package__}.{module}"), cls)
 
 
-def model_folder(model_name: str) -> Path:
-    """The model's folder: its code and its README.md (the model card)."""
-    return MODELS_DIR / _entry(model_name)[0].split(".")[0]
+def model_folder(model_name: str) -> str:
+    """The name of the model's folder under models/: its code and its README.md (the card)."""
+    return _entry(model_name)[0].split(".")[0]
 
 
 def make_physics(model_name: str, parameters: dict, effects) -> PhysicsModel:

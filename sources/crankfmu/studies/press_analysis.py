@@ -13,7 +13,7 @@ Equation of motion (eq. 1, 5; static law or electrical lag):
     J(phi) phi'' + 1/2 J'(phi) phi'^2 = i M_D + M_C(phi),   tau (i M_D)' + i M_D = D - s phi'.
 
 The derivations (and the points where the printed paper is wrong) are in
-docs/models/stephenson_press_analysis.md; each function's docstring names its equation.
+docs/stephenson_press_analysis.md; each function's docstring names its equation.
 
 Conventions: a harmonic l of a periodic signal x(t) of fundamental nu is written
     x(t) = sum_l X_l cos(l nu t + alpha_l) = sum_l Re[Xc_l exp(i l nu t)], Xc_l = X_l e^{i alpha_l},

@@ -1,7 +1,7 @@
 """Rocker impact unit: the paper's analysis (seed rocker_impact_unit, eq. 1-18).
 
 The equations, (1)-(2) and the pinned rocker, are in `rocker_linear` (the FMU's share of the
-theory); docs/models/rocker_impact.md has the derivation.
+theory); sources/crankfmu/models/rocker_impact/README.md has the derivation.
 
 What is here
     RockerData                 the rocker, the contact, the rod and the bearing constant k_n.

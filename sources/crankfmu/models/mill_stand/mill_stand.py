@@ -2,8 +2,7 @@
 
 Two crank gears on one shaft (crank radius r, pins A and H coaxial) drive the stand (mass m_s,
 pins C and F coaxial) through two rods 2 and 4 of nominal length l; the stand moves along its
-guides (coordinate x, from the crank axis to the stand pins). Derivations: docs/models/
-mill_stand.md.
+guides (coordinate x, from the crank axis to the stand pins). Derivations: README.md here.
 
 Kinematics (lambda = r/l, R = sqrt(l^2 - r^2 sin^2 phi), rod angle beta: sin beta = r sin phi/l):
     x   = r cos phi + R

@@ -1,5 +1,5 @@
 """Planetary drive of a crank press with friction brakes on the ring and the carrier
-(seed planetary_drive_friction_clutch; MODELS.md section 3; docs/models/planetary_drive.md).
+(seed planetary_drive_friction_clutch; MODELS.md section 3; sources/crankfmu/models/planetary_drive/README.md).
 
 Type-A planetary gear: sun a (driven by the motor through the `sun_*` port), internal ring b,
 carrier h (drives the press through the `flange_*` port). p = r_b/r_a = -i_ab^h, Willis:
@@ -53,7 +53,7 @@ communication point, or inside a step if the input changes continuously).
 Press coupling: the carrier port (flange_tau/flange_J in, flange_w/flange_phi out) lets a press be
 coupled later. Coupling a press that has its own dynamics rigidly to the carrier is the classic
 hard case of co-simulation (two inertias on one rigid shaft, algebraic loop through the
-torque): see docs/models/planetary_drive.md.
+torque): see sources/crankfmu/models/planetary_drive/README.md.
 """
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """Crank-rocker hammer: a motor-driven crank swings the impact rocker through a spring rod
-(docs/models/crank_rocker.md; the rocker, contact and support are RockerImpact's, MODELS.md 4).
+(sources/crankfmu/models/rocker_impact/crank_rocker.md; the rocker, contact and support are RockerImpact's, MODELS.md 4).
 
     Geometry (x along the tool axis toward the tool, y up, pivot O at (u0, 0)):
         strike point  O + S (sin th, -cos th)          (moves along +x by S th near th = 0)
@@ -37,7 +37,7 @@ class CrankRockerHammer(RockerImpact):
     model_name = "CrankRockerHammer"
     description = ("Crank-rocker hammer: motor-driven crank, spring rod, rocker striking an "
                    "elastic rod tool on an elastic pivot support")
-    seed = "rocker_impact_unit.txt (rocker, contact, support); linkage: docs/models/crank_rocker.md"
+    seed = "rocker_impact_unit.txt (rocker, contact, support); linkage: sources/crankfmu/models/rocker_impact/crank_rocker.md"
 
     parameters = _ROCKER_PARAMETERS + (
         Variable("crank_radius", "m", "Crank radius a", 0.04, min=0.0),

@@ -4,7 +4,7 @@ A rigid rocker (inertia J about the pivot, mass m, centre of mass at r, strike p
 the pivot) strikes the end of a semi-infinite elastic rod (the tool). The pivot rests on an
 elastic support that moves along the tool axis. Coordinates: u0 the pivot displacement (toward
 the tool), theta the rocker angle from the strike position (the strike point moves by
-u0 + S theta), w the tool end. Lagrange (docs/models/rocker_impact.md):
+u0 + S theta), w the tool end. Lagrange (sources/crankfmu/models/rocker_impact/README.md):
 
     m u0'' + m r theta''       = -P - T                  T = c0 u0       (support)
     m r u0'' + J_t theta''     = -P S + tau_drive        J_t = J + flange_J

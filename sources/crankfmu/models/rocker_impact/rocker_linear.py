@@ -4,7 +4,7 @@ first approximation, the exact linear solution and the fixed-point linearisation
 and support stiffnesses. The paper's further analysis (second approximation, validity, the MO-100
 table and claims) is in `rocker_analysis`, outside the FMU runtime.
 
-Coordinates (docs/models/rocker_impact.md has the derivation): u0 is the pivot's displacement
+Coordinates (sources/crankfmu/models/rocker_impact/README.md has the derivation): u0 is the pivot's displacement
 along the tool axis, theta the rocker angle (the strike point moves by S theta), w the tool end.
 
     m (u0'' + r theta'') = -P - T,    m r u0'' + J theta'' = -P S          (Lagrange)

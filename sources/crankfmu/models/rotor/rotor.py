@@ -1,7 +1,7 @@
 """Linear test drive train: a rotor, and a rotor driven through a compliant shaft.
 
 Two small linear models whose composition (the two-mass oscillator) has a closed-form solution,
-so the masters' error and convergence order can be measured against it (docs/models/rotor.md).
+so the masters' error and convergence order can be measured against it (sources/crankfmu/models/rotor/README.md).
 
 Rotor (torque in, speed out):
     dphi/dt = w,   J dw/dt = tau - c phi - d w
@@ -64,7 +64,7 @@ class LinearModel(PhysicsModel):
 class Rotor(LinearModel):
     model_name = "Rotor"
     description = "Rigid rotor with optional spring and damper to ground, driven by a torque"
-    seed = "textbook (two-mass oscillator test case, docs/models/rotor.md)"
+    seed = "textbook (two-mass oscillator test case, sources/crankfmu/models/rotor/README.md)"
     parameters = (
         Variable("J", "kg.m2", "Rotor inertia", 1.0, min=0.0),
         Variable("c", "N.m/rad", "Spring to ground", 0.0, min=0.0),
@@ -102,7 +102,7 @@ class Rotor(LinearModel):
 class ShaftRotor(LinearModel):
     model_name = "ShaftRotor"
     description = "Rotor driven through a compliant shaft (spring-damper) from a speed input"
-    seed = "textbook (two-mass oscillator test case, docs/models/rotor.md)"
+    seed = "textbook (two-mass oscillator test case, sources/crankfmu/models/rotor/README.md)"
     parameters = (
         Variable("J", "kg.m2", "Rotor inertia", 1.0, min=0.0),
         Variable("k", "N.m/rad", "Shaft torsional stiffness", 100.0, min=0.0),

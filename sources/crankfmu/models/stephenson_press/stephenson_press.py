@@ -25,7 +25,7 @@ x = phi - (pi/2 - forging_angle) (mod 2 pi) in [0, forging_angle], else 0 (the w
 The window's edges are kinks of M_C: they are events (the integrator stops and restarts there).
 
 Rigid coupling to a driving member that integrates the shaft itself (effect driven_crank; e.g. the
-carrier of PlanetaryClutchDrive, docs/models/planetary_drive.md section 6): the press then has no
+carrier of PlanetaryClutchDrive, sources/crankfmu/models/planetary_drive/README.md section 6): the press then has no
 states; its input shaft follows the inputs shaft_phi, shaft_w (phi = phi_start + shaft_phi/i,
 phi' = shaft_w/i) and it returns what the shaft must carry, the two terms of eq. (1) that are not
 the acceleration's:
