@@ -1,30 +1,5 @@
-"""Three-phase induction motor, static torque-slip characteristic (seed
-planetary_drive_friction_clutch, eq. (2)-(3); MODELS.md section 3).
-
-Kloss formula (the paper's eq. (2), its text lost; this is the standard form):
-
-    M = 2 M_k s s_k / (s^2 + s_k^2),        s = 1 - w/w_s
-
-from the nameplate data: rated power P_rated, rated speed n_rated, synchronous speed n_sync and
-the breakdown ratio lambda_k = M_k/M_n:
-
-    w_s = pi n_sync/30,  w_n = pi n_rated/30,  s_n = 1 - n_rated/n_sync,
-    M_n = P_rated/w_n,   M_k = lambda_k M_n,
-    s_k = s_n (lambda_k + sqrt(lambda_k^2 - 1))
-
-(the last follows from M(s_n) = M_n in the Kloss formula, taking the root s_k > s_n of the stable
-branch). Effect `linear_law`: the low-slip limit s << s_k of the Kloss formula,
-
-    M = 2 M_k s/s_k                          (the printed eq. (3) "M = 1.39 M_k s/s_k" is garbled;
-                                              2 is the limit of Kloss for s -> 0)
-
-which is linear in the speed: M = c0 - c1 w with c0 = 2 M_k/s_k, c1 = c0/w_s.
-
-No states: the torque is an algebraic function of the shaft speed (direct feedthrough from
-`flange_w` to `flange_tau`). The rotor and any flywheel on the motor shaft are reported through
-`flange_J` so that the mechanism integrates them together with its own inertia (port convention
-of MODELS.md section 1).
-"""
+"""Three-phase induction motor, static torque-slip characteristic (Kloss law, or its linear
+low-slip limit with effect linear_law). Equations and their derivation: README.md here."""
 from __future__ import annotations
 
 import math

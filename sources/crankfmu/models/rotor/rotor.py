@@ -1,21 +1,6 @@
-"""Linear test drive train: a rotor, and a rotor driven through a compliant shaft.
-
-Two small linear models whose composition (the two-mass oscillator) has a closed-form solution,
-so the masters' error and convergence order can be measured against it (sources/crankfmu/models/rotor/README.md).
-
-Rotor (torque in, speed out):
-    dphi/dt = w,   J dw/dt = tau - c phi - d w
-ShaftRotor (speed in, torque out): a rotor J_2 driven from the input flange through a shaft of
-stiffness k and damping d_s; theta = phi_flange - phi is the shaft twist:
-    dtheta/dt = w_in - w,   dphi/dt = w,
-    J dw/dt = k theta + d_s (w_in - w) - c phi - d w,
-    tau_flange = -(k theta + d_s (w_in - w))        (the torque the shaft puts on the flange)
-Both also output their stored energy E = J w^2/2 + c phi^2/2 (+ k theta^2/2).
-
-The models are linear, x' = A x + B u, so `advance` integrates a step exactly with a matrix
-exponential when the input is a polynomial of degree <= 2 over the step (what the FMU receives);
-the internal tolerance then plays no part in the co-simulation error.
-"""
+"""Linear test drive train: a rotor (torque in, speed out), and a rotor driven through a compliant
+shaft (speed in, torque out). Their composition, the two-mass oscillator, has a closed-form
+solution, so the masters' error and order are measured against it. Equations: README.md here."""
 from __future__ import annotations
 
 import numpy as np
@@ -64,7 +49,7 @@ class LinearModel(PhysicsModel):
 class Rotor(LinearModel):
     model_name = "Rotor"
     description = "Rigid rotor with optional spring and damper to ground, driven by a torque"
-    seed = "textbook (two-mass oscillator test case, sources/crankfmu/models/rotor/README.md)"
+    seed = "textbook (two-mass oscillator test case, models/rotor/README.md)"
     parameters = (
         Variable("J", "kg.m2", "Rotor inertia", 1.0, min=0.0),
         Variable("c", "N.m/rad", "Spring to ground", 0.0, min=0.0),
@@ -102,7 +87,7 @@ class Rotor(LinearModel):
 class ShaftRotor(LinearModel):
     model_name = "ShaftRotor"
     description = "Rotor driven through a compliant shaft (spring-damper) from a speed input"
-    seed = "textbook (two-mass oscillator test case, sources/crankfmu/models/rotor/README.md)"
+    seed = "textbook (two-mass oscillator test case, models/rotor/README.md)"
     parameters = (
         Variable("J", "kg.m2", "Rotor inertia", 1.0, min=0.0),
         Variable("k", "N.m/rad", "Shaft torsional stiffness", 100.0, min=0.0),
