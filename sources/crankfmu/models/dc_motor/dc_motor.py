@@ -1,28 +1,6 @@
-"""Separately excited DC servo motor (seed stephenson_press_servo_drive, eq. 4, 29-30).
-
-    tau dM/dt + M = M_s,   M_s = clip(mu U - s w, -M_max, M_max)   (effect electrical_lag)
-    M = M_s                                                          (lag off: static law)
-    tau = L_a/R_a,  mu = k_phi/R_a,  s = k_phi^2/R_a
-
-The torque limit acts on the torque the armature current may build (a current limit), so it
-bounds both the static law and the target of the lag.
-
-Speed loop (effect speed_loop): PI controller on the motor speed with back-calculation
-anti-windup (tracking time T_t = k_p/k_i):
-    U_c = k_p (w_ref - w) + I,   U = clip(U_c, -U_max, U_max),
-    dI/dt = k_i (w_ref - w) + (U - U_c)/T_t.
-Off: U is the input `u`.
-
-Integration (`advance`): in closed form, exact for any tau > 0 (tau = 1e-6 s at a 1 ms step
-costs what tau = 1e-2 s costs). Over a step the inputs are polynomials of degree <= 2 (the
-master's extrapolation), so:
-  - unsaturated loop: I(s) = I_0 + k_i int e (a cubic), U = k_p e + I (a cubic);
-    saturated: U = +-U_max, I(s) = +-U_max + (I_0 -+ U_max) exp(-s k_i/k_p);
-  - M_s = clip(mu U - s w, +-M_max) is then a piecewise polynomial, and the lag follows it
-    exactly (closed_form.lag_step, the phi-function formula).
-The step is split where the voltage or the torque limit is reached or left (roots of cubics
-between their critical points; leaving the voltage limit by bracketing). With solver = "scipy"
-the same equations go through solve_ivp (Radau) instead, as a cross-check.
+"""Separately excited DC servo motor with optional armature lag and PI speed loop (seed
+stephenson_press_servo_drive, eq. (4), (29)-(30)), integrated in closed form.
+Equations, integration, variables and tests: the model card README.md in this folder.
 """
 from __future__ import annotations
 
