@@ -69,6 +69,8 @@ def run_impact(args) -> int:
     from ..physics.rocker_analysis import (RockerData, claims, format_claims,
                                            format_impact_table, impact_table)
 
+    if args.plot:  # bad --plot or --scene fails before the table is computed
+        out, scene = _plot_dir(args.plot), _scene_file(args.scene)
     changes = {k: getattr(args, k) for k in ("J", "m", "r", "R_c", "d", "E", "rho", "nu", "V0")
                if getattr(args, k) is not None}
     rows = impact_table(RockerData(**changes), args.S_factor, args.k_n)
@@ -77,7 +79,7 @@ def run_impact(args) -> int:
     print(format_claims(claims(rows)))
     if args.plot:
         from ..studies.papers import impact_figures
-        _written(impact_figures(_scene_file(args.scene), _plot_dir(args.plot)))
+        _written(impact_figures(scene, out))
     return 0
 
 
