@@ -39,6 +39,16 @@ def register(sub) -> None:
                        help="the servo press scene whose parameters are used (default "
                             "scenarios/servo_press.toml)")
     press.set_defaults(func=run_press)
+    planetary = what.add_parser("planetary", help="seed 001's figures: the four periods, "
+                                                  "engagement time against alpha_b, brake "
+                                                  "torque for an engagement time (--plot DIR)")
+    planetary.add_argument("--plot", type=Path, metavar="DIR", required=True,
+                           help="directory for planetary.png")
+    planetary.add_argument("--scene", type=Path,
+                           default=Path("scenarios/planetary_engagement.toml"),
+                           help="the planetary drive scene (motor and drive parameters; default "
+                                "scenarios/planetary_engagement.toml)")
+    planetary.set_defaults(func=run_planetary)
     hammer = what.add_parser("hammer", help="blow table of a hammer run (CSV of hammer.toml or "
                                             "hammer_bearings.toml); --plot PNG")
     hammer.add_argument("csv", type=Path, nargs="+", help="result CSV(s) of a hammer scene")
@@ -89,6 +99,14 @@ def run_press(args) -> int:
 
     out = _plot_dir(args.plot)
     _written(press_figures(load_scene(_scene_file(args.scene)), out))
+    return 0
+
+
+def run_planetary(args) -> int:
+    from ..studies.papers import planetary_figures
+
+    out = _plot_dir(args.plot)
+    _written(planetary_figures(_scene_file(args.scene), out))
     return 0
 
 

@@ -13,7 +13,11 @@ seed 000 (Stephenson servo press, crankfmu.physics.press_analysis):
 seed 004 (rocker impact, crankfmu.physics.rocker_analysis):
     impact_forces.png         P(t), T(t): first approximation (6), (12), second approximation
                               (14)-(18), against the RockerImpact run of the scene
-seed 001 (planetary clutch drive): see `planetary_figures`.
+seed 001 (planetary clutch drive, crankfmu.physics.planetary_drive):
+    planetary.png             speeds over the four periods and the brake energies, the
+                              engagement time against alpha_b, the ring brake torque needed for a
+                              given engagement time: the closed form of the linear motor law
+                              (piecewise matrix exponentials) against the FMU runs of the scene
 
 Here only the figures and the short simulations behind them; the equations are the physics
 modules' (nothing in physics/ imports this module).
@@ -418,3 +422,277 @@ def _save(figures: dict, out_dir: Path) -> list[Path]:
         fig.savefig(path, dpi=100)
         paths.append(path)
     return paths
+
+
+# =============================================================================================
+# seed 001: planetary clutch drive, linear motor law in closed form
+# =============================================================================================
+def linear_motor_law(motor) -> tuple[float, float]:
+    """(c0, c1) of M = c0 - c1 w_a [N m, N m s/rad] of an InductionMotor with effect linear_law
+    (read from the model's own output at w = 0 and w = 1 rad/s)."""
+    def M(w):
+        return float(motor.output_values(0.0, [], [w, 0.0])[0])
+    return M(0.0), M(0.0) - M(1.0)
+
+
+def planetary_closed_form(d: dict, c0: float, c1: float, scene: str, w_a0: float, w_h0: float,
+                          t_end: float, n: int = 400, lock_only: bool = False) -> dict:
+    """Engagement ('engage': ring brake b engages by M_p (1 - e^(-alpha_b t)), carrier brake h
+    releases by M_p e^(-beta_h t)) or stopping ('stop': the reverse) from the speeds w_a0, w_h0
+    (the held member at rest), with the linear motor law. Each phase (fixed lock/slide pattern)
+    is linear time-invariant in z = (w_b, w_h, e_b, e_h, 1), e_k the brakes' exponentials:
+    z(t) = expm(A t) z(t_i); break-free and lock are roots of linear functionals of z (brentq on
+    the exact expm). The same construction as tests/planetary_reference.py's `closed_form`,
+    extended by the speeds on a grid and the brake energies (trapezoidal rule on the grid,
+    n intervals per phase: relative error ~1e-6). Units SI; d holds the drive's parameters."""
+    from scipy.optimize import brentq
+
+    expm = _expm
+    p = d["r_b"] / d["r_a"]
+    Ja, Jb, Jh = d["J_a"], d["J_b"], d["J_h"]
+    m11, m12, m22 = Ja * p * p + Jb, -Ja * p * (1 + p), Ja * (1 + p) ** 2 + Jh
+    if scene == "engage":
+        lam = (d["alpha_b"], d["beta_h"])
+        Mt = {"b": np.array([0, 0, -d["Mp_b"], 0, d["Mp_b"]]),
+              "h": np.array([0, 0, 0, d["Mp_h"], 0])}
+        mode1, held, mover = {"b": -1, "h": 0}, "h", "b"
+    else:
+        lam = (d["beta_b"], d["alpha_h"])
+        Mt = {"b": np.array([0, 0, d["Mp_b"], 0, 0]),
+              "h": np.array([0, 0, 0, -d["Mp_h"], d["Mp_h"]])}
+        mode1, held, mover = {"b": 0, "h": 1}, "b", "h"
+    unit = np.array([0, 0, 0, 0, 1.0])
+    C = {"b": Mt["b"] + d["M_cb"] * unit, "h": Mt["h"] + d["M_ch"] * unit}
+    M_A = np.array([c1 * p, -c1 * (1 + p), 0, 0, c0 - d["M_ca"]])  # motor - M_ca, linear in z
+    Q_b, Q_h = -p * M_A, (1 + p) * M_A
+
+    def pieces(mode):
+        A = np.zeros((5, 5))
+        A[2, 2], A[3, 3] = -lam[0], -lam[1]
+        if mode["b"] and mode["h"]:
+            F_b, F_h = -mode["b"] * C["b"], -mode["h"] * C["h"]
+            acc = np.linalg.solve(np.array([[m11, m12], [m12, m22]]),
+                                  np.vstack([Q_b + F_b, Q_h + F_h]))
+            A[0], A[1] = acc[0], acc[1]
+        elif mode["h"]:
+            F_h = -mode["h"] * C["h"]
+            A[1] = (Q_h + F_h) / m22
+            F_b = m12 * A[1] - Q_b
+        else:
+            F_b = -mode["b"] * C["b"]
+            A[0] = (Q_b + F_b) / m11
+            F_h = m12 * A[0] - Q_h
+        return A, F_b, F_h
+
+    def grid(A, z, span):
+        step = expm(A * (span / n))
+        out = [z]
+        for _ in range(n):
+            out.append(step @ out[-1])
+        return np.linspace(0.0, span, n + 1), np.array(out)
+
+    def first_root(f, A, z, span):
+        ts, zs = grid(A, z, span)
+        vals = [f(zz) for zz in zs]
+        for a, b, fa, fb in zip(ts[:-1], ts[1:], vals[:-1], vals[1:]):
+            if fa * fb < 0.0:
+                return brentq(lambda s: f(expm(A * s) @ z), a, b, xtol=1e-15, rtol=1e-15,
+                              maxiter=200)
+        raise ValueError(f"planetary closed form ({scene}): no event within {t_end} s")
+
+    z0 = np.array([(-w_a0 + (1 + p) * w_h0) / p, w_h0, 1.0, 1.0, 1.0])
+    A1, F_b1, F_h1 = pieces(mode1)
+    F1 = F_h1 if held == "h" else F_b1
+    t1 = first_root(lambda z: float(C[held] @ z - abs(F1 @ z)), A1, z0, t_end)
+    z1 = expm(A1 * t1) @ z0
+    mode2 = dict(mode1, **{held: -1 if float(F1 @ z1) > 0 else 1})
+    A2, _, _ = pieces(mode2)
+    i_mover = 0 if mover == "b" else 1
+    t2 = t1 + first_root(lambda z: float(z[i_mover]), A2, z1, t_end - t1)
+    if lock_only:
+        return {"t_slip": t1, "t_lock": t2}
+    z2 = expm(A2 * (t2 - t1)) @ z1
+    z2[i_mover] = 0.0
+    A3, _, _ = pieces(dict(mode2, **{mover: 0}))
+    t, z = [], []
+    for A, za, ta, tb in ((A1, z0, 0.0, t1), (A2, z1, t1, t2), (A3, z2, t2, t_end)):
+        ts, zs = grid(A, za, tb - ta)
+        t.append(ts + ta)
+        z.append(zs)
+    t, z = np.concatenate(t), np.concatenate(z)
+    w_b, w_h = z[:, 0], z[:, 1]
+    out = {"t_slip": t1, "t_lock": t2, "t": t, "w_b": w_b, "w_h": w_h,
+           "w_a": -p * w_b + (1 + p) * w_h}
+    for k, w in (("b", w_b), ("h", w_h)):   # brake power M_t |w| (zero while locked)
+        power = (z @ Mt[k]) * np.abs(w)
+        out[f"E_brake_{k}"] = np.concatenate(
+            [[0.0], np.cumsum(0.5 * (power[1:] + power[:-1]) * np.diff(t))])
+    return out
+
+
+PLANETARY_ALPHAS = (15.0, 60.0)            # 1/s: simulated engagement rates besides the scene's
+SWEEP_STEP = 5e-4   # s: communication step of those runs (the FMU locates the lock itself; the
+                    # motor torque held over a step costs O(h): ~5e-5 of the lock time)
+PLANETARY_TARGETS = (0.2, 0.3)             # s: simulated engagement times (markers)
+T_COMMAND_ON, T_COMMAND_OFF, T_STOP = 0.05, 0.55, 1.0   # s: the four-period run
+
+
+def planetary_setup(scene_path):
+    """(scene with the motor's linear law and the idle start speed of that law, drive parameters,
+    c0, c1, idle w_a). The linear law makes the simulation and the closed form the same
+    equations, so they can be compared to the co-simulation's accuracy."""
+    from .. import api
+    from ..physics.induction_motor import InductionMotor
+    from ..physics.planetary_drive import PlanetaryClutchDrive, steady_state
+
+    scene = api.load_scene(scene_path)
+    motor_c = scene.components["motor"]
+    if "linear_law" not in motor_c.effects:
+        motor_c.effects.append("linear_law")
+    motor = InductionMotor(motor_c.parameters, motor_c.effects)
+    d = dict(scene.components["drive"].parameters)
+    w_idle = steady_state(PlanetaryClutchDrive(d), motor, 1)["w_a"]
+    scene.components["drive"].parameters["w_a_start"] = w_idle
+    d["w_a_start"] = w_idle
+    return scene, d, *linear_motor_law(motor), w_idle
+
+
+def planetary_engagement_time(d: dict, c0: float, c1: float, w_idle: float,
+                              t_end: float = 2.0) -> float:
+    """Closed-form engagement time (the ring locks) [s] from idle; inf if it does not lock."""
+    try:
+        return planetary_closed_form(d, c0, c1, "engage", w_idle, 0.0, t_end, n=100,
+                                     lock_only=True)["t_lock"]
+    except ValueError:
+        return math.inf
+
+
+def brake_torque_for_engagement_time(d: dict, c0: float, c1: float, w_idle: float,
+                                     target: float) -> float:
+    """The ring brake's design torque Mp_b [N m] whose closed-form engagement time is `target`
+    [s] (the paper: "with the engagement time limited, the brake torques needed follow"):
+    brentq on Mp_b, the engagement time falling as Mp_b grows."""
+    from scipy.optimize import brentq
+
+    def f(Mp):
+        return min(planetary_engagement_time({**d, "Mp_b": Mp}, c0, c1, w_idle), 10.0) - target
+    return brentq(f, 50.0, 1e5, xtol=1e-4, rtol=1e-9)
+
+
+def planetary_data(scene_path) -> dict:
+    """The four-period run and the closed forms beside it; engagement time against alpha_b and
+    the brake torque for a given engagement time, closed form and simulated."""
+    from .. import api
+    from ..scenario.scene import InputSignal
+
+    scene, d, c0, c1, w_idle = planetary_setup(scene_path)
+    four = api.prepare(scene, stop_time=T_STOP)
+    four.inputs["drive.command"] = InputSignal("drive.command", [0.0, T_COMMAND_ON,
+                                               T_COMMAND_OFF], [0.0, 1.0, 0.0], "step")
+    v = api.simulate(four).values
+    t = v["time"]
+    k_off = int(np.argmin(np.abs(t - T_COMMAND_OFF)))
+    engage = planetary_closed_form(d, c0, c1, "engage", w_idle, 0.0, T_COMMAND_OFF - T_COMMAND_ON)
+    stop = planetary_closed_form(d, c0, c1, "stop", float(v["drive.w_a"][k_off]),
+                                 float(v["drive.w_h"][k_off]), T_STOP - T_COMMAND_OFF)
+    alphas = np.linspace(10.0, 80.0, 36)
+    sims = {d["alpha_b"]: float(v["drive.t_lock_b"][-1]) - T_COMMAND_ON}  # the four-period run
+    for a in PLANETARY_ALPHAS:
+        t_cf = planetary_engagement_time({**d, "alpha_b": a}, c0, c1, w_idle)
+        r = api.simulate(scene, stop_time=t_cf + 0.01, step=SWEEP_STEP,
+                         parameters={"drive.alpha_b": a}).values
+        sims[a] = float(r["drive.t_lock_b"][-1])
+    targets = np.linspace(0.15, 0.45, 13)
+    Mp_check = [brake_torque_for_engagement_time(d, c0, c1, w_idle, x) for x in PLANETARY_TARGETS]
+    t_check = []
+    for Mp, x in zip(Mp_check, PLANETARY_TARGETS):
+        r = api.simulate(scene, stop_time=x + 0.01, step=SWEEP_STEP,
+                         parameters={"drive.Mp_b": Mp}).values
+        t_check.append(float(r["drive.t_lock_b"][-1]))
+    return {"sim": {k: v[k] for k in ("time", "drive.w_a", "drive.w_b", "drive.w_h",
+                                      "drive.E_brake_b", "drive.E_brake_h", "drive.period",
+                                      "drive.t_lock_b", "drive.t_lock_h")},
+            "engage": engage, "stop": stop, "alpha_grid": alphas,
+            "t_lock_grid": np.array([planetary_engagement_time({**d, "alpha_b": a}, c0, c1,
+                                                               w_idle) for a in alphas]),
+            "alpha_sim": np.array(sorted(sims)), "t_lock_sim": np.array([sims[a] for a in
+                                                                          sorted(sims)]),
+            "t_lock_cf_sim": np.array([planetary_engagement_time({**d, "alpha_b": a}, c0, c1,
+                                                                 w_idle) for a in sorted(sims)]),
+            "targets": targets, "Mp_needed": np.array(
+                [brake_torque_for_engagement_time(d, c0, c1, w_idle, x) for x in targets]),
+            "Mp_check": np.array(Mp_check), "t_check": np.array(t_check),
+            "alpha_b": d["alpha_b"], "Mp_b": d["Mp_b"]}
+
+
+def figure_planetary(d: dict):
+    from ..cosim.results import axis_label, new_figure, style_axes
+
+    fig = new_figure(figsize=(11, 8))
+    gs = fig.add_gridspec(2, 2)
+    ax_w, ax_e = fig.add_subplot(gs[0, 0]), fig.add_subplot(gs[1, 0])
+    ax_a, ax_m = fig.add_subplot(gs[0, 1]), fig.add_subplot(gs[1, 1])
+    for x in (ax_w, ax_e, ax_a, ax_m):
+        style_axes(x)
+    s = d["sim"]
+    for key, name in (("w_a", "sun a (motor)"), ("w_b", "ring b"), ("w_h", "carrier h")):
+        ax_w.plot(s["time"], s[f"drive.{key}"], lw=2.2, alpha=0.5, label=f"{name}, simulation")
+    for part, t0 in (("engage", T_COMMAND_ON), ("stop", T_COMMAND_OFF)):
+        c = d[part]
+        for key in ("w_a", "w_b", "w_h"):
+            ax_w.plot(c["t"] + t0, c[key], "k--", lw=0.8,
+                      label="closed form (linear motor law)" if (part, key) == ("engage", "w_a")
+                      else "_")
+    E_end = d["engage"]["E_brake_b"][-1], d["engage"]["E_brake_h"][-1]
+    for j, (k, name) in enumerate((("b", "ring brake b"), ("h", "carrier brake h"))):
+        ax_e.plot(s["time"], s[f"drive.E_brake_{k}"] / 1e3, lw=2.2, alpha=0.5,
+                  label=f"{name}, simulation")
+        ax_e.plot(d["engage"]["t"] + T_COMMAND_ON, d["engage"][f"E_brake_{k}"] / 1e3, "k--",
+                  lw=0.8, label="closed form" if j == 0 else "_")
+        ax_e.plot(d["stop"]["t"] + T_COMMAND_OFF, (d["stop"][f"E_brake_{k}"] + E_end[j]) / 1e3,
+                  "k--", lw=0.8, label="_")
+    for x in (ax_w, ax_e):
+        for edge, text in ((T_COMMAND_ON, "engage"), (T_COMMAND_OFF, "stop")):
+            x.axvline(edge, color="grey", lw=0.6, ls=":")
+        x.set_xlabel(axis_label("time", "s"))
+    ax_w.set_ylabel(axis_label("angular velocity", "rad/s"))
+    ax_e.set_ylabel(axis_label("brake energy (cumulative)", "kJ"))
+    ax_w.set_title("Periods 1-4: idle, engagement, stroke, stopping, idle", fontsize=9)
+    ax_a.plot(d["alpha_grid"], d["t_lock_grid"], lw=1.4, label="closed form")
+    ax_a.plot(d["alpha_sim"], d["t_lock_sim"], "o", ms=6, label="simulation (ring locks)")
+    ax_a.set_xlabel(axis_label("ring brake engagement rate alpha_b", "1/s"))
+    ax_a.set_ylabel(axis_label("engagement time", "s"))
+    ax_a.set_title(f"Engagement time against alpha_b (Mp_b = {d['Mp_b']:.0f} N.m)", fontsize=9)
+    ax_m.plot(d["targets"], d["Mp_needed"], lw=1.4, label="closed form, inverted")
+    ax_m.plot(d["t_check"], d["Mp_check"], "o", ms=6, label="simulation at that Mp_b")
+    ax_m.set_xlabel(axis_label("required engagement time", "s"))
+    ax_m.set_ylabel(axis_label("ring brake torque Mp_b needed", "N.m"))
+    ax_m.set_title(f"Brake torque for a given engagement time (alpha_b = {d['alpha_b']:.0f} 1/s)",
+                   fontsize=9)
+    for x in (ax_w, ax_e, ax_a, ax_m):
+        x.legend(fontsize=7, loc="best")
+    fig.suptitle("Seed 001: planetary clutch drive, the four periods (eq. 7-10), brake laws "
+                 "(4)-(5); induction motor, linear law (3)", fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def planetary_figures(scene, out_dir: Path) -> list[Path]:
+    return _save({"planetary.png": figure_planetary(planetary_data(scene))}, out_dir)
+
+
+def _expm(M: np.ndarray) -> np.ndarray:
+    """exp(M) of a small matrix by scaling and squaring with a degree-16 Taylor polynomial
+    (||M/2^k|| <= 1/2: truncation 2^-17/17! ~ 1e-20 relative). scipy.linalg.expm costs
+    ~20 ms a call for these 5x5 matrices on a loaded machine; this ~50 us, and the closed
+    forms call it thousands of times."""
+    norm = float(np.max(np.sum(np.abs(M), axis=1)))
+    k = max(0, int(math.ceil(math.log2(norm / 0.5)))) if norm > 0.5 else 0
+    X = M / 2.0 ** k
+    E = term = np.eye(M.shape[0])
+    for j in range(1, 17):
+        term = term @ X / j
+        E = E + term
+    for _ in range(k):
+        E = E @ E
+    return E
