@@ -156,7 +156,7 @@ PLANETARY_TOL = 2e-4
 def test_four_periods_against_the_closed_form():
     """Speeds over engagement and stopping: measured <= 9.5e-6 of max w_a; lock times 6.4e-6
     (engagement), 3e-7 (stopping) relative; brake energies at the stop command and at the end
-    <= 4e-6 relative (brake b 6807 J, 6856 J; brake h 6624 J at the end)."""
+    <= 7.2e-6 relative (brake b 6807 J, 6856 J; brake h 6624 J at the end)."""
     d = planetary_data()
     s, t = d["sim"], d["sim"]["time"]
     assert set(np.unique(s["drive.period"])) == {1.0, 2.0, 3.0, 4.0}
