@@ -88,6 +88,16 @@ def test_missing_scene_is_a_clear_error(tmp_path, capsys):
     assert f"--scene {missing}: no such scene file" in err and "Traceback" not in err
 
 
+@pytest.mark.parametrize("subject, scene, needs", [
+    ("press", "hammer.toml", "'press' of FMU StephensonPress (found none)"),
+    ("planetary", "servo_press.toml", "'motor' of FMU InductionMotor (found a DcServoMotor)")])
+def test_scene_of_the_wrong_kind_is_a_clear_error(tmp_path, capsys, subject, scene, needs):
+    path = ROOT / "scenarios" / scene
+    assert main(["analyze", subject, "--plot", str(tmp_path), "--scene", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert f"{path}: components." in err and needs in err and "Traceback" not in err
+
+
 def test_unknown_subject_is_a_usage_error(capsys):
     with pytest.raises(SystemExit) as exit_:
         main(["analyze", "pres", "--plot", "x"])

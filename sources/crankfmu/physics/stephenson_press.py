@@ -23,8 +23,8 @@ translating link (docs/models/stephenson_press.md).
 Reduced inertia and its derivative (eq. 2, 22; ' is d/dphi):
     J(phi)    = J_c + m5 S'^2 [+ rods],   J_c = i^2 J_input + J1 + m2 r^2
     J'(phi)/2 = m5 S' S''     [+ rods]
-Rods (effect rod_inertia): two uniform bars, centre C = (r cos(phi)/2, r sin(phi) + (l/2) sin psi + a),
-each adding m_rod |C'|^2 + (m_rod l^2/12) psi'^2 to J and m_rod C'.C'' +
+Rods (effect rod_inertia): two uniform bars, centre C = (r cos(phi)/2, r sin(phi) + (l/2) sin psi
++ a), each adding m_rod |C'|^2 + (m_rod l^2/12) psi'^2 to J and m_rod C'.C'' +
 (m_rod l^2/12) psi' psi'' to J'/2.
 
 Motion (eq. 1):  J(phi) phi'' + J'(phi)/2 phi'^2 = i M_D + M_C(phi)

@@ -30,6 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..scenario.scene import SceneError
+
 TWO_PI = 2.0 * math.pi
 A_FIGURE = 0.08  # m: base-link offset drawn in press_base_link.png (triangle height, ~ l/3)
 
@@ -193,7 +195,7 @@ def press_models(scene, motor: str = "motor", press: str = "press"):
     from ..physics.dc_motor import DcServoMotor
     from ..physics.stephenson_press import StephensonPress
 
-    p, m = scene.components[press], scene.components[motor]
+    p, m = _component(scene, press, "StephensonPress"), _component(scene, motor, "DcServoMotor")
     u0 = float(scene.inputs[f"{motor}.u"].values[0]) if f"{motor}.u" in scene.inputs else 220.0
     effects = [e for e in m.effects if e not in ("speed_loop", "electrical_lag")]
     return (StephensonPress(p.parameters, p.effects), DcServoMotor(m.parameters, effects),
@@ -319,7 +321,8 @@ def figure_flywheel(d: dict):
     ax = fig.subplots(2, 1, sharex=True)
     for x in ax:
         style_axes(x)
-    ax[0].plot(d["grid"], d["ratio"], lw=1.4, label="sqrt of (26): gear moment / disturbance, l = 1")
+    ax[0].plot(d["grid"], d["ratio"], lw=1.4,
+               label="sqrt of (26): gear moment / disturbance, l = 1")
     ax[0].axvline(d["J_Mx"], color="k", lw=0.8, ls=":", label=f"(28): J_Mx = {d['J_Mx']:.4f} "
                   "kg.m2 on the motor shaft")
     ax[1].plot(d["J_f"], 100 * d["delta_sim"], "o-", ms=5, label="simulation (static law)")
@@ -354,11 +357,15 @@ def impact_data(scene) -> dict:
     from .. import api
     from ..physics import rocker_analysis as ra
 
-    result = api.simulate(scene)
-    v = result.values
-    comp = next(n for n in result.names if n.endswith(".P")).rsplit(".", 1)[0]
-    c, c0 = float(v[f"{comp}.c_contact_used"][0]), float(v[f"{comp}.c_support_used"][0])
     sc = api.load_scene(scene)
+    comp = next((c.name for c in sc.components.values() if c.fmu == "RockerImpact"), None)
+    if comp is None:
+        _component(sc, "impact", "RockerImpact")   # raises: no such component
+    for var in ("P", "T", "c_contact_used", "c_support_used"):
+        if f"{comp}.{var}" not in sc.record:
+            raise SceneError(sc.path, "record.variables", f"the figure needs {comp}.{var}")
+    v = api.simulate(sc).values
+    c, c0 = float(v[f"{comp}.c_contact_used"][0]), float(v[f"{comp}.c_support_used"][0])
     params = sc.components[comp].parameters
     data = ra.RockerData(**{k: float(params[k]) for k in ("J", "m", "r", "S", "R_c", "d", "E",
                                                           "rho", "nu", "V0", "k_n")
@@ -394,7 +401,7 @@ def figure_impact(d: dict):
         top.plot(t_ms, sim, lw=2.4, alpha=0.5, label="simulation (RockerImpact FMU)")
         top.plot(t_ms, first, lw=1.0, ls=":", label=f"first approximation {eq}")
         top.plot(t_ms, second, lw=1.0, ls="--", label="second approximation (14)-(18)")
-        low.plot(t_ms, sim - first, lw=2.4, alpha=0.5, label=f"simulation - first approximation")
+        low.plot(t_ms, sim - first, lw=2.4, alpha=0.5, label="simulation - first approximation")
         low.plot(t_ms, second - first, lw=1.0, ls="--", label=f"correction d{key} of (14)-(18)")
         top.set_ylabel(axis_label(name, "kN"))
         low.set_ylabel(axis_label(f"correction to {key}", "kN"))
@@ -413,6 +420,17 @@ def impact_figures(scene, out_dir: Path) -> list[Path]:
 
 
 # =============================================================================================
+def _component(scene, name: str, fmu: str):
+    """The scene's component `name`, which must be a `fmu`; else a SceneError (exit 2) saying
+    what the figure needs."""
+    comp = scene.components.get(name)
+    if comp is None or comp.fmu != fmu:
+        found = f"a {comp.fmu}" if comp is not None else "none"
+        raise SceneError(scene.path, f"components.{name}",
+                         f"the figure needs a component {name!r} of FMU {fmu} (found {found})")
+    return comp
+
+
 def _save(figures: dict, out_dir: Path) -> list[Path]:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -546,7 +564,11 @@ def planetary_setup(scene_path):
     from ..physics.planetary_drive import PlanetaryClutchDrive, steady_state
 
     scene = api.load_scene(scene_path)
-    motor_c = scene.components["motor"]
+    motor_c = _component(scene, "motor", "InductionMotor")
+    _component(scene, "drive", "PlanetaryClutchDrive")
+    for var in ("w_a", "w_b", "w_h", "E_brake_b", "E_brake_h", "period", "t_lock_b", "t_lock_h"):
+        if f"drive.{var}" not in scene.record:
+            raise SceneError(scene.path, "record.variables", f"the figure needs drive.{var}")
     if "linear_law" not in motor_c.effects:
         motor_c.effects.append("linear_law")
     motor = InductionMotor(motor_c.parameters, motor_c.effects)
