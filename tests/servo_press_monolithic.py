@@ -1,6 +1,6 @@
 """Test fixture: DC servo motor + Stephenson press as ONE ODE, solved by scipy solve_ivp.
 
-Not a test file. It composes the physics objects of `crankfmu.physics` (the same equations the
+Not a test file. It composes the physics objects of `crankfmu.models` (the same equations the
 FMUs use) with the rigid connection of the port convention:
 
     motor inputs   flange_w = i w,  flange_phi = i phi,  u,  w_ref

@@ -1,7 +1,9 @@
 """`crankfmu analyze impact`: the rocker impact paper's table and which of its claims hold;
 `crankfmu analyze hammer CSV`: the blows of a hammer run (hammer.toml, hammer_bearings.toml);
 `crankfmu analyze flywheel DIR/sweep.csv`: the servo press's delta against the flywheel from a
-sweep, with the paper's eq. (28) (crankfmu/studies/flywheel.py)."""
+sweep, with the paper's eq. (28) (crankfmu/studies/flywheel.py);
+`crankfmu analyze press|impact|planetary --plot DIR`: the papers' figures, each analytic curve
+beside the simulation it approximates (crankfmu/studies/papers.py)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -21,7 +23,32 @@ def register(sub) -> None:
                         help="support constants k_n [N(2/3)/m]")
     impact.add_argument("--S-factor", type=float, nargs="+", default=[1.1, 0.9],
                         help="strike distance S as a multiple of the centre of percussion J/(m r)")
+    impact.add_argument("--plot", type=Path, metavar="DIR",
+                        help="write impact_forces.png (seed 004, Fig. 2-3: P(t), T(t), first and "
+                             "second approximation against the run of --scene) into DIR")
+    impact.add_argument("--scene", type=Path, default=Path("scenarios/mo100_impact.toml"),
+                        help="the impact scene run for --plot (default "
+                             "scenarios/mo100_impact.toml)")
     impact.set_defaults(func=run_impact)
+    press = what.add_parser("press", help="seed 000's figures: dynamic errors, base-link "
+                                          "inertia with offset a, flywheel (--plot DIR)")
+    press.add_argument("--plot", type=Path, metavar="DIR", required=True,
+                       help="directory for press_dynamic_error.png, press_base_link.png, "
+                            "press_flywheel.png")
+    press.add_argument("--scene", type=Path, default=Path("scenarios/servo_press.toml"),
+                       help="the servo press scene whose parameters are used (default "
+                            "scenarios/servo_press.toml)")
+    press.set_defaults(func=run_press)
+    planetary = what.add_parser("planetary", help="seed 001's figures: the four periods, "
+                                                  "engagement time against alpha_b, brake "
+                                                  "torque for an engagement time (--plot DIR)")
+    planetary.add_argument("--plot", type=Path, metavar="DIR", required=True,
+                           help="directory for planetary.png")
+    planetary.add_argument("--scene", type=Path,
+                           default=Path("scenarios/planetary_engagement.toml"),
+                           help="the planetary drive scene (motor and drive parameters; default "
+                                "scenarios/planetary_engagement.toml)")
+    planetary.set_defaults(func=run_planetary)
     hammer = what.add_parser("hammer", help="blow table of a hammer run (CSV of hammer.toml or "
                                             "hammer_bearings.toml); --plot PNG")
     hammer.add_argument("csv", type=Path, nargs="+", help="result CSV(s) of a hammer scene")
@@ -52,13 +79,62 @@ def run_impact(args) -> int:
     from ..studies.rocker_analysis import (RockerData, claims, format_claims, format_impact_table,
                                            impact_table)
 
+    if args.plot:  # bad --plot or --scene fails before the table is computed
+        out, scene = _plot_dir(args.plot), _scene_file(args.scene)
     changes = {k: getattr(args, k) for k in ("J", "m", "r", "R_c", "d", "E", "rho", "nu", "V0")
                if getattr(args, k) is not None}
     rows = impact_table(RockerData(**changes), args.S_factor, args.k_n)
     print(format_impact_table(rows))
     print()
     print(format_claims(claims(rows)))
+    if args.plot:
+        from ..studies.papers import impact_figures
+        _written(impact_figures(scene, out))
     return 0
+
+
+def run_press(args) -> int:
+    from ..system.load import load_scene
+    from ..studies.papers import press_figures
+
+    out = _plot_dir(args.plot)
+    _written(press_figures(load_scene(_scene_file(args.scene)), out))
+    return 0
+
+
+def run_planetary(args) -> int:
+    from ..studies.papers import planetary_figures
+
+    out = _plot_dir(args.plot)
+    _written(planetary_figures(_scene_file(args.scene), out))
+    return 0
+
+
+def _plot_dir(path: Path) -> Path:
+    """--plot DIR: created if missing; an existing file there is an error (exit 2)."""
+    from ..errors import CrankfmuError
+
+    if path.exists() and not path.is_dir():
+        raise CrankfmuError(f"--plot {path}: is a file; --plot takes a directory for the PNGs")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise CrankfmuError(f"--plot {path}: cannot create the directory ({err.strerror})")
+    return path
+
+
+def _scene_file(path: Path) -> Path:
+    from ..errors import CrankfmuError
+
+    if not path.is_file():
+        raise CrankfmuError(f"--scene {path}: no such scene file (run from the repository root "
+                            "or give --scene)")
+    return path
+
+
+def _written(paths) -> None:
+    for path in paths:
+        print(f"wrote {path}")
 
 
 # -- hammer runs -------------------------------------------------------------------------------

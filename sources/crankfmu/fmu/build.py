@@ -102,11 +102,11 @@ def _write_script(dest: Path, model_name: str, digest: str) -> Path:
 
 
 def model_card_files(model_name: str) -> list[Path]:
-    """The model's card: README.md of its folder, and <module>.md beside the class's module
-    where one model folder holds several FMU models (the hammer beside the rocker unit)."""
+    """The model's card: README.md of its folder first, then the folder's other .md files
+    (derivations, the hammer beside the rocker unit)."""
     folder = PACKAGE_DIR / "models" / model_folder(model_name)
-    module = FMU_MODELS[model_name].split(":")[0].split(".")[-1]
-    return [path for path in (folder / "README.md", folder / f"{module}.md") if path.is_file()]
+    readme = folder / "README.md"
+    return [readme] * readme.is_file() + sorted(p for p in folder.glob("*.md") if p != readme)
 
 
 def model_card_html(model_name: str) -> str:

@@ -66,7 +66,7 @@ class ReducedDrive:
 
     @classmethod
     def from_models(cls, press, motor, u0: float) -> "ReducedDrive":
-        """Build from a StephensonPress and a DcServoMotor (crankfmu.physics objects).
+        """Build from a StephensonPress and a DcServoMotor (crankfmu.models objects).
 
         u0 [V] is the constant armature voltage (speed loop off)."""
         i = press.p.gear_ratio

@@ -35,11 +35,14 @@ from typing import Sequence
 import numpy as np
 
 # the linear theory lives in the FMU runtime (rocker_linear); re-exported for the analyses
-from ..models.rocker_impact.rocker_linear import (  # noqa: F401
-    ITERATION_RTOL, K_N_VALUES, P_GUESS, S_FACTORS, T_GUESS_RATIO, AnalysisError, Coefficients,
-    FirstApproximation, ImpactResult, LinearFlow, Linearisation, RockerData, Signal, _grid_size,
-    coefficients, exact_linear, extremum, first_approximation, first_return_to_zero,
-    hertz_constant, linearise, linearised_contact_stiffness, support_stiffness)
+from ..models.rocker_impact.rocker_linear import (ITERATION_RTOL, K_N_VALUES, P_GUESS, S_FACTORS,
+                                                  T_GUESS_RATIO, AnalysisError, Coefficients,
+                                                  FirstApproximation, ImpactResult, LinearFlow,
+                                                  Linearisation, RockerData, Signal, _grid_size,
+                                                  coefficients, exact_linear, extremum,
+                                                  first_approximation, first_return_to_zero,
+                                                  hertz_constant, linearise,
+                                                  linearised_contact_stiffness, support_stiffness)
 
 
 # -- second approximation -------------------------------------------------------------------

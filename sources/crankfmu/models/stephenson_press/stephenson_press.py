@@ -5,17 +5,26 @@ Coordinates: x horizontal, y downward, crank centre O at the origin. The crank p
 the two parallel rods 3, 4 (length l) join it to the slider 5 on the vertical through O:
 
     cos psi = -r cos(phi)/l,  sin psi = +sqrt(1 - cos^2 psi)   (rod angle, 0 < psi < pi)
-    S   = r sin(phi) + l sin(psi)                              (slider, BDC at phi = pi/2)
+    S   = r sin(phi) + l sin(psi) + a                          (slider, BDC at phi = pi/2)
     psi'  = -(r/l) sin(phi)/sin(psi)
     psi'' = -[(r/l) cos(phi) + psi'^2 cos(psi)]/sin(psi)       (printed eq. 3 has a sign error)
     S'  = r cos(phi) + l psi' cos(psi)
     S'' = -r sin(phi) - l psi'^2 sin(psi) + l psi'' cos(psi)
 
+Base-link offset a (eq. 21; parameter `a`, default 0): link 2 is an equilateral triangle with
+the crank pin A at one vertex and the rods' hinges on the opposite side, a below A (its height);
+its centre of mass S2 is 2a/3 below A. The two equal parallel rods make link 2, the rods and the
+slider a parallelogram, so link 2 keeps the slider's orientation: it translates, every point of it
+moves like A, S2' = A' and J_2O = m2 |S2'|^2 = m2 r^2 for every a. The offset shifts the slider
+(S above, as printed in eq. 3) and the potential energy by constants and changes no term of
+eq. (1); the printed (21), r^2 + 4a^2/9 - (4/3) a r sin(phi), is not the kinetic energy of a
+translating link (sources/crankfmu/models/stephenson_press/geometry.md).
+
 Reduced inertia and its derivative (eq. 2, 22; ' is d/dphi):
     J(phi)    = J_c + m5 S'^2 [+ rods],   J_c = i^2 J_input + J1 + m2 r^2
     J'(phi)/2 = m5 S' S''     [+ rods]
-Rods (effect rod_inertia): two uniform bars with centre C = (r cos(phi)/2, r sin(phi) + (l/2) sin psi),
-each adding m_rod |C'|^2 + (m_rod l^2/12) psi'^2 to J and m_rod C'.C'' +
+Rods (effect rod_inertia): two uniform bars, centre C = (r cos(phi)/2, r sin(phi) + (l/2) sin psi
++ a), each adding m_rod |C'|^2 + (m_rod l^2/12) psi'^2 to J and m_rod C'.C'' +
 (m_rod l^2/12) psi' psi'' to J'/2.
 
 Motion (eq. 1):  J(phi) phi'' + J'(phi)/2 phi'^2 = i M_D + M_C(phi)
@@ -57,7 +66,8 @@ class StephensonPress(PhysicsModel):
         Variable("r", "m", "Crank radius", 0.05, min=0.0),
         Variable("l", "m", "Length of the parallel rods 3 and 4 (must exceed r)", 0.25, min=0.0),
         Variable("J1", "kg.m2", "Crank inertia about O", 2.0, min=0.0),
-        Variable("m2", "kg", "Mass of base link 2 (centre at hinge A)", 20.0, min=0.0),
+        Variable("m2", "kg", "Mass of base link 2 (centre 2a/3 below hinge A; a = 0: at A)",
+                 20.0, min=0.0),
         Variable("m5", "kg", "Slider mass", 50.0, min=0.0),
         Variable("m_rod", "kg", "Mass of each rod (used with effect rod_inertia)", 5.0, min=0.0),
         Variable("gear_ratio", "1", "Gear ratio i = motor speed / crank speed", 10.0, min=0.0),
@@ -67,6 +77,9 @@ class StephensonPress(PhysicsModel):
         Variable("g", "m/s2", "Gravitational acceleration (effect gravity)", G_STANDARD, min=0.0),
         Variable("phi_start", "rad", "Crank angle at the start time", 0.0),
         Variable("w_start", "rad/s", "Crank angular velocity at the start time", 0.0),
+        Variable("a", "m", "Base-link offset: height of the triangular link 2 from hinge A to the "
+                 "rods' hinges (eq. 21); shifts the slider by a, leaves J(phi) and M_C unchanged",
+                 0.0),
     )
     effects = (
         Effect("gravity", "Weights of slider, base link (and rods) in M_C"),
@@ -90,7 +103,7 @@ class StephensonPress(PhysicsModel):
         Variable("flange_phi", "rad", "Motor shaft angle i*phi", depends_on=_driven),
         Variable("phi", "rad", "Crank angle (continuous, not wrapped)", depends_on=_driven),
         Variable("w_crank", "rad/s", "Crank angular velocity phi'", depends_on=_driven),
-        Variable("slider_s", "m", "Slider position S, downward, r + l at BDC",
+        Variable("slider_s", "m", "Slider position S, downward, r + l + a at BDC",
                  depends_on=_driven),
         Variable("slider_v", "m/s", "Slider velocity S' phi'", depends_on=_driven),
         Variable("F5", "N", "Forging force on the slider", depends_on=_driven),
@@ -140,7 +153,7 @@ class StephensonPress(PhysicsModel):
         sin_psi = math.sqrt(1.0 - cos_psi * cos_psi)
         dpsi = -r_l * sin_phi / sin_psi
         ddpsi = -(r_l * cos_phi + dpsi * dpsi * cos_psi) / sin_psi
-        S = r * sin_phi + l * sin_psi
+        S = r * sin_phi + l * sin_psi + p.a  # + a last: a = 0 leaves S bit-identical
         dS = r * cos_phi + l * dpsi * cos_psi
         ddS = -r * sin_phi - l * dpsi * dpsi * sin_psi + l * ddpsi * cos_psi
         J = i2_ * J_input + J_fixed + m5 * dS * dS
