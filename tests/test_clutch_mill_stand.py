@@ -7,7 +7,7 @@ load read from crank_acceleration and reduced_inertia, inputs from the state, on
 Master and step: Gauss-Seidel [drive, stand, motor], h = 1 ms (the scene's): the stand's torque
 and inertia J(phi)/i^2, the motor torque and the carrier's angle and speed are held over the
 step, O(h) coupling errors. Window: engagement at 0.1 s, 1.4 s of strokes, stop at 1.5 s, the
-carrier locks at ~1.75 s; 1.9 s covers it all.
+carrier locks at 1.73 s; 1.9 s covers it all.
 """
 from __future__ import annotations
 
