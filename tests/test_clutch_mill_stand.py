@@ -7,7 +7,7 @@ load read from crank_acceleration and reduced_inertia, inputs from the state, on
 Master and step: Gauss-Seidel [drive, stand, motor], h = 1 ms (the scene's): the stand's torque
 and inertia J(phi)/i^2, the motor torque and the carrier's angle and speed are held over the
 step, O(h) coupling errors. Window: engagement at 0.1 s, 1.4 s of strokes, stop at 1.5 s, the
-carrier locks at 1.73 s; 1.9 s covers it all.
+carrier locks at 1.79 s; 1.9 s covers it all.
 """
 from __future__ import annotations
 
@@ -24,11 +24,12 @@ T = 1.9  # s
 SIGNALS = ("stand.phi", "stand.w_crank", "stand.stand_x", "drive.w_a", "drive.E_brake_b",
            "drive.E_brake_h", "stand.E_friction", "stand.E_load")
 ENERGY = ("drive.W_sun", "drive.E_kin", "drive.E_resist")
-# Measured at h = 1 ms (printed): <= 2.0e-3 of each signal's maximum (the ring brake's energy,
-# which integrates the slip during the engagement of the 60 kg m^2 stand; the others <= 1.5e-3);
+# Measured at h = 1 ms (printed): <= 1.7e-3 of each signal's maximum (the ring brake's energy,
+# which integrates the slip during the engagement of the 37-70 kg m^2 stand; the others
+# <= 1.3e-3);
 # asserted 4e-3; each halves at 0.5 ms (asserted: ratio within [1.5, 2.5]). Energy balance
 # (motor work against the kinetic energy, brakes, resistances, pin friction and rolling work),
-# relative to the motor work: measured 1.0e-3, asserted 2e-3 and the same ratio; the reference
+# relative to the motor work: measured 1.1e-3, asserted 2e-3 and the same ratio; the reference
 # closes it to its tolerance.
 SIGNAL_TOL, BALANCE_TOL, REFERENCE_BALANCE_TOL = 4e-3, 2e-3, 1e-8
 
@@ -84,9 +85,9 @@ def test_agrees_with_rigid_reference(runs, cosim, reference):
     assert max(e.values()) < SIGNAL_TOL
     for k in SIGNALS:  # first order in the step: the difference is the coupling, not the model
         assert 1.5 < e[k] / e2[k] < 2.5, k
-    # the run happened: about two crank revolutions (2.13), engaged, stopped and locked (6 events:
+    # the run happened: about 2.5 crank revolutions (2.48), engaged, stopped and locked (6 events:
     # two command edges, carrier free, ring locks, ring free, carrier locks) in both
-    assert 2.0 < (reference["stand.phi"][-1] - reference["stand.phi"][0]) / (2 * np.pi) < 2.3
+    assert 2.3 < (reference["stand.phi"][-1] - reference["stand.phi"][0]) / (2 * np.pi) < 2.7
     assert reference["drive.n_events"][-1] == cosim["drive.n_events"][-1] == 6
     assert reference["stand.w_crank"][-1] == cosim["stand.w_crank"][-1] == 0.0
 
