@@ -31,7 +31,8 @@ from crankfmu.system.load import load_scene
 ROOT = Path(__file__).resolve().parents[1]
 STOP = {"servo_press": 0.4, "conventional_press": 1.0, "hammer": 0.4, "hammer_bearings": 0.4,
         "mill_stand": 0.2, "mill_stand_p2p3": 0.2, "mill_stand_p4": 0.2, "mo100_impact": None,
-        "planetary_engagement": 0.25, "planetary_stopping": 0.25, "servo_press_speed_loop": 0.4}
+        "planetary_engagement": 0.25, "planetary_stopping": 0.25, "servo_press_speed_loop": 0.4,
+        "clutch_hammer": 0.4, "clutch_mill_stand": 0.3}
 GLOBAL_FACTOR = 100.0     # x fmu_tolerance, see the module docstring
 PULSE_SAMPLES = {"P", "T"}
 EVENT_TIMES = {"t_lock_b", "t_slip_b", "t_lock_h", "t_slip_h", "t_command"}

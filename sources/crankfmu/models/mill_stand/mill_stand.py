@@ -28,6 +28,16 @@ mu r_pin |P| against its relative rotation: (1 + beta') phi' at A and H (crank -
 beta' phi' at C and F (rod - stand). By virtual work this is one torque at the crank:
     M_f = -2 mu r_pin |P| (1 + beta' + |beta'|) tanh(phi'/w_reg),   P_friction = -M_f phi'.
 Rolling load (effect rolling_load): F_load = -F_roll tanh(v/v_reg) against the stand velocity v.
+
+Rigid coupling to a driver that integrates the shaft itself (effect driven_crank, the port
+convention of docs/ports.md; e.g. the carrier of PlanetaryClutchDrive): no crank states (the
+energy integrals E_friction, E_load stay); the crank follows shaft_phi, shaft_w (phi = phi_start
++ shaft_phi/i, phi' = shaft_w/i) and the stand returns the terms of its reduced equation other
+than the acceleration's, at the input shaft:
+    shaft_J   = J(phi)/i^2                                         (with flange_J inside J)
+    shaft_tau = (M_f(phi, phi') + x' F_load - m_s x' x'' phi'^2)/i
+The crank acceleration is then the driver's: stand_a, F_rod2, F_rod4 need it and are reported
+as 0 in this mode (README.md here, section 10).
 """
 from __future__ import annotations
 
@@ -88,37 +98,56 @@ class MillStandDrive(PhysicsModel):
         Effect("assembly_preload", "Preload from the rod length error where the joints are "
                "redundant, and the pin friction it causes"),
         Effect("rolling_load", "Constant rolling force F_roll against the stand velocity"),
+        Effect("driven_crank", "No crank states: the crank follows shaft_phi/shaft_w of a "
+               "rigidly coupled driver, which takes shaft_tau and shaft_J (rigid coupling, "
+               "docs/ports.md)"),
     )
     inputs = (
         Variable("flange_tau", "N.m", "Drive torque M_D on the motor shaft", 0.0),
         Variable("flange_J", "kg.m2", "Inertia rigidly on the motor shaft (J_input)", 0.0,
                  min=0.0),
+        Variable("shaft_phi", "rad", "Input shaft angle i*(phi - phi_start) from the driver "
+                 "(effect driven_crank)", 0.0),
+        Variable("shaft_w", "rad/s", "Input shaft angular velocity i*phi' from the driver "
+                 "(effect driven_crank)", 0.0),
     )
     _ff = ("flange_tau", "flange_J")
+    _driven = ("shaft_phi", "shaft_w")  # feedthrough with effect driven_crank only
     outputs = (
-        Variable("flange_w", "rad/s", "Motor shaft angular velocity i*phi'"),
-        Variable("flange_phi", "rad", "Motor shaft angle i*phi"),
-        Variable("phi", "rad", "Crank angle (continuous, not wrapped)"),
-        Variable("w_crank", "rad/s", "Crank angular velocity phi'"),
-        Variable("stand_x", "m", "Stand position: crank axis to stand pins, l + r at phi = 0"),
-        Variable("stand_v", "m/s", "Stand velocity"),
-        Variable("stand_a", "m/s2", "Stand acceleration", depends_on=_ff),
-        Variable("F_rod2", "N", "Axial force in rod 2 (tension positive)", depends_on=_ff),
-        Variable("F_rod4", "N", "Axial force in rod 4 (tension positive)", depends_on=_ff),
+        Variable("flange_w", "rad/s", "Motor shaft angular velocity i*phi'", depends_on=_driven),
+        Variable("flange_phi", "rad", "Motor shaft angle i*phi", depends_on=_driven),
+        Variable("phi", "rad", "Crank angle (continuous, not wrapped)", depends_on=_driven),
+        Variable("w_crank", "rad/s", "Crank angular velocity phi'", depends_on=_driven),
+        Variable("stand_x", "m", "Stand position: crank axis to stand pins, l + r at phi = 0",
+                 depends_on=_driven),
+        Variable("stand_v", "m/s", "Stand velocity", depends_on=_driven),
+        Variable("stand_a", "m/s2", "Stand acceleration (0 with driven_crank: the crank "
+                 "acceleration is the driver's)", depends_on=_ff + _driven),
+        Variable("F_rod2", "N", "Axial force in rod 2 (tension positive; 0 with driven_crank)",
+                 depends_on=_ff + _driven),
+        Variable("F_rod4", "N", "Axial force in rod 4 (tension positive; 0 with driven_crank)",
+                 depends_on=_ff + _driven),
         Variable("preload", "N", "Assembly preload P (compression of rod 2, tension of rod 4)"),
         Variable("stand_skew", "rad", "Skew of the stand that takes up the rod length error "
                  "(self-aligning variants)"),
-        Variable("M_friction", "N.m", "Pin friction torque from the preload, at the crank"),
-        Variable("P_friction", "W", "Friction loss power in the pins A, C, F, H"),
+        Variable("M_friction", "N.m", "Pin friction torque from the preload, at the crank",
+                 depends_on=_driven),
+        Variable("P_friction", "W", "Friction loss power in the pins A, C, F, H",
+                 depends_on=_driven),
         Variable("E_friction", "J", "Friction energy dissipated since the start"),
-        Variable("F_load", "N", "Rolling force on the stand (along x)"),
+        Variable("F_load", "N", "Rolling force on the stand (along x)", depends_on=_driven),
         Variable("E_load", "J", "Work done against the rolling force since the start"),
         Variable("J_reduced", "kg.m2", "Reduced inertia J(phi) at the crank",
-                 depends_on=("flange_J",)),
+                 depends_on=("flange_J",) + _driven),
         Variable("W_mobility", "1", "Seed's mobility count W (main + local) of the variant"),
         Variable("q_malyshev", "1", "Seed's redundant constraints q (Malyshev/Ozol with W)"),
         Variable("q_rank", "1", "Redundant constraints of the coaxial drive by the Jacobian "
                  "rank (with the guides if guides_hold_skew)"),
+        Variable("shaft_tau", "N.m", "Torque of the stand on its input shaft apart from inertia, "
+                 "(M_f + x' F_load - m_s x' x'' phi'^2)/i (for a rigidly coupled driver)",
+                 depends_on=_driven),
+        Variable("shaft_J", "kg.m2", "Stand inertia at its input shaft J(phi)/i^2 (for a "
+                 "rigidly coupled driver)", depends_on=("flange_J",) + _driven),
     )
 
     def check(self, p):
@@ -219,9 +248,24 @@ class MillStandDrive(PhysicsModel):
             return T * l4 / (l2 + l4) - P, T * l2 / (l2 + l4) + P, a
         return 0.5 * T, 0.5 * T, a
 
+    def shaft_load(self, phi, w, J_input: float = 0.0) -> tuple[float, float]:
+        """(shaft_tau, shaft_J) at the input shaft for crank angle phi and speed w = phi'."""
+        i = self.p.gear_ratio
+        J, half_dJ = self.reduced_inertia(phi, J_input)
+        dx = self.kinematics(phi)[1]
+        M = self.friction_torque(phi, w) + dx * self.load_force(phi, w) - half_dJ * w * w
+        return float(M) / i, float(J) / (i * i)
+
+    def crank_motion(self, x, u) -> tuple[float, float]:
+        """(phi, phi'): the states, or with driven_crank the driver's shaft over the gear."""
+        if self.on("driven_crank"):
+            i = self.p.gear_ratio
+            return self.p.phi_start + u[2] / i, u[3] / i
+        return x[0], x[1]
+
     # -- contract -------------------------------------------------------------------------
     def state_names(self):
-        names = ["phi", "w_crank"]
+        names = [] if self.on("driven_crank") else ["phi", "w_crank"]
         if self.on("assembly_preload"):
             names.append("E_friction")
         if self.on("rolling_load"):
@@ -229,12 +273,12 @@ class MillStandDrive(PhysicsModel):
         return tuple(names)
 
     def initial_state(self, u):
-        return np.array([self.p.phi_start, self.p.w_start]
-                        + [0.0] * (len(self.state_names()) - 2), dtype=float)
+        crank = [] if self.on("driven_crank") else [self.p.phi_start, self.p.w_start]
+        return np.array(crank + [0.0] * (len(self.state_names()) - len(crank)), dtype=float)
 
     def derivatives(self, t, x, u):
-        phi, w = x[0], x[1]
-        out = [w, self.crank_acceleration(phi, w, u)]
+        phi, w = self.crank_motion(x, u)
+        out = [] if self.on("driven_crank") else [w, self.crank_acceleration(phi, w, u)]
         if self.on("assembly_preload"):
             out.append(-self.friction_torque(phi, w) * w)
         if self.on("rolling_load"):
@@ -242,11 +286,11 @@ class MillStandDrive(PhysicsModel):
         return np.array(out, dtype=float)
 
     def output_values(self, t, x, u):
-        phi, w = x[0], x[1]
+        phi, w = self.crank_motion(x, u)
         names = self.state_names()
         i = self.p.gear_ratio
         xs, dx, _, _, _ = self.kinematics(phi)
-        T2, T4, a = self.rod_forces(phi, w, u)
+        T2, T4, a = (0.0, 0.0, 0.0) if self.on("driven_crank") else self.rod_forces(phi, w, u)
         M_f = self.friction_torque(phi, w)
         J, _ = self.reduced_inertia(phi, u[1])
         E_f = x[names.index("E_friction")] if "E_friction" in names else 0.0
@@ -255,4 +299,5 @@ class MillStandDrive(PhysicsModel):
         q_rank = (Q_RANK_GUIDED if self.p.guides_hold_skew == 1.0 else Q_RANK_FREE_SKEW)[v]
         return np.array([i * w, i * phi, phi, w, xs, dx * w, a, T2, T4, self.preload(),
                          self.stand_skew(), M_f, -M_f * w, E_f, self.load_force(phi, w), E_l,
-                         J, W_SEED[v], Q_SEED[v], q_rank], dtype=float)
+                         J, W_SEED[v], Q_SEED[v], q_rank, *self.shaft_load(phi, w, u[1])],
+                        dtype=float)

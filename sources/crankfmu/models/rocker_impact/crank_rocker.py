@@ -18,6 +18,19 @@ Equations: the crank, J_cr phi'' = i tau_m + M_rod, J_cr = J_crank + i^2 J_motor
 crank through a gear of ratio i = motor speed / crank speed); the rocker as in RockerImpact with
 the rod force as applied force at B (torque about O and component along the tool axis on the
 pivot). Energy: E_mech + E_radiated + E_damped = E_mech(0) + W_drive.
+
+Rigid coupling to a driver that integrates the shaft itself (effect driven_crank, the port
+convention of docs/ports.md; e.g. the carrier of PlanetaryClutchDrive): the crank then has no
+states (the rocker, contact and support keep theirs); it follows the inputs shaft_phi, shaft_w
+(phi = phi_start + shaft_phi/i, phi' = shaft_w/i) and returns what the shaft must carry, the
+terms of the crank equation J_cr phi'' = i tau_m + M_rod other than the acceleration's, reduced
+to the input shaft (the crank's inertia is constant, so there is no J'/2 phi'^2 term):
+    shaft_J   = J_crank/i^2 + flange_J      (added to the driver's inertia)
+    shaft_tau = M_rod(phi, phi', rocker)/i  (added to the driver's torques)
+The driver then integrates (J_d + J_crank/i^2) w_d' = tau_d + M_rod/i, the hammer's crank equation
+with w_d = i phi'. W_drive becomes the work of the crank on the rod, -integral M_rod phi' dt, and
+E_mech leaves out the crank's kinetic energy (the driver counts it with shaft_J), so the hammer's
+own balance E_mech + E_radiated + E_damped = E_mech(0) + W_drive keeps its form.
 """
 from __future__ import annotations
 
@@ -28,6 +41,14 @@ import numpy as np
 from ...runtime.model import Effect, ParameterError, Variable
 from .rocker_impact import RockerImpact
 from ...runtime.roots import brentq
+
+def _with_driven(v: Variable) -> Variable:
+    """RockerImpact's T and E_mech also depend on the rod force, so on the driven crank."""
+    if v.name not in ("T", "E_mech"):
+        return v
+    return Variable(v.name, v.unit, v.description, v.start, v.min, v.max,
+                    v.depends_on + ("shaft_phi", "shaft_w"))
+
 
 _ROCKER_PARAMETERS = tuple(v for v in RockerImpact.parameters
                            if v.name not in ("strike_at_start", "theta_start", "w_start"))
@@ -57,29 +78,47 @@ class CrankRockerHammer(RockerImpact):
         Variable("support_damping", "N.s/m", "Viscous damping of the elastic pivot support "
                  "(0: the paper's undamped support)", 0.0, min=0.0),
     )
-    effects = RockerImpact.effects
+    effects = RockerImpact.effects + (
+        Effect("driven_crank", "No crank states: the crank follows shaft_phi/shaft_w of a "
+               "rigidly coupled driver, which takes shaft_tau and shaft_J (rigid coupling, "
+               "docs/ports.md)"),
+    )
     inputs = (
         Variable("flange_tau", "N.m", "Motor torque on the motor shaft (crank side of the gear)",
                  0.0),
         Variable("flange_J", "kg.m2", "Inertia rigidly on the motor shaft (rotor, flywheel)",
                  0.0, min=0.0),
+        Variable("shaft_phi", "rad", "Input shaft angle i*(phi - phi_start) from the driver "
+                 "(effect driven_crank)", 0.0),
+        Variable("shaft_w", "rad/s", "Input shaft angular velocity i*phi' from the driver "
+                 "(effect driven_crank)", 0.0),
     )
+    _driven = ("shaft_phi", "shaft_w")  # feedthrough with effect driven_crank only
     outputs = (
-        Variable("flange_w", "rad/s", "Motor shaft speed i phi'"),
-        Variable("flange_phi", "rad", "Motor shaft angle i phi"),
-        Variable("phi", "rad", "Crank angle"),
-        Variable("w_crank", "rad/s", "Crank speed"),
+        Variable("flange_w", "rad/s", "Motor shaft speed i phi'", depends_on=_driven),
+        Variable("flange_phi", "rad", "Motor shaft angle i phi", depends_on=_driven),
+        Variable("phi", "rad", "Crank angle", depends_on=_driven),
+        Variable("w_crank", "rad/s", "Crank speed", depends_on=_driven),
         Variable("theta", "rad", "Rocker angle from the strike position"),
         Variable("omega", "rad/s", "Rocker angular speed"),
-        Variable("F_rod", "N", "Rod force (tension > 0)"),
-        Variable("M_load", "N.m", "Load torque of the rod on the motor shaft, -M_rod/i"),
-        Variable("W_drive", "J", "Work of the motor torque, cumulative"),
+        Variable("F_rod", "N", "Rod force (tension > 0)", depends_on=_driven),
+        Variable("M_load", "N.m", "Load torque of the rod on the motor shaft, -M_rod/i",
+                 depends_on=_driven),
+        Variable("W_drive", "J", "Work of the motor torque, cumulative (driven_crank: work of "
+                 "the crank on the rod)"),
         Variable("E_damped", "J", "Energy dissipated in the rod and support dampers, cumulative"),
-    ) + tuple(v for v in RockerImpact.outputs if v.name not in ("flange_w", "flange_phi"))
+        Variable("shaft_tau", "N.m", "Torque of the hammer on its input shaft apart from the "
+                 "crank's inertia, M_rod/i (for a rigidly coupled driver)", depends_on=_driven),
+        Variable("shaft_J", "kg.m2", "Inertia at the input shaft J_crank/i^2 + flange_J (for a "
+                 "rigidly coupled driver)", depends_on=("flange_J",)),
+    ) + tuple(_with_driven(v) for v in RockerImpact.outputs
+              if v.name not in ("flange_w", "flange_phi"))
 
     def __init__(self, parameters=None, effects=None):
         super().__init__(parameters, effects)
         self._L0 = self.free_length
+        self._driven = self.on("driven_crank")
+        self._n_crank = 0 if self._driven else 2  # crank states phi, w_crank before the energies
 
     def _check_geometry(self, p):
         for name in ("crank_radius", "arm_length", "gear_ratio"):
@@ -117,12 +156,19 @@ class CrankRockerHammer(RockerImpact):
             return self.p.rod_length
         return float(np.linalg.norm(self._pin(math.pi) - self._eye(0.0, 0.0)))
 
-    def rod(self, x):
+    def crank_motion(self, x, u) -> tuple[float, float]:
+        """(phi, phi'): the crank states, or with driven_crank the driver's shaft over the gear."""
+        if self._driven:
+            i = self.p.gear_ratio
+            return self.p.phi_start + u[2] / i, u[3] / i
+        return x[-4], x[-3]
+
+    def rod(self, x, u):
         """(F_rod, torque on the rocker about O, force on the rocker along x, torque on the
         crank, rod stretch l - L0, rate l')."""
         p = self.p
         u0, v0, th, om = self._split(x)[:4]
-        phi, w = x[-4], x[-3]
+        phi, w = self.crank_motion(x, u)
         B, Q = self._eye(u0, th), self._pin(phi)
         d = Q - B
         ell = math.hypot(d[0], d[1])
@@ -152,10 +198,12 @@ class CrankRockerHammer(RockerImpact):
 
     # -- contract -------------------------------------------------------------------------------
     def state_names(self):
-        return super().state_names() + ("phi", "w_crank", "W_drive", "E_damped")
+        crank = () if self._driven else ("phi", "w_crank")
+        return super().state_names() + crank + ("W_drive", "E_damped")
 
     def state_nominal(self) -> np.ndarray:
-        return np.concatenate([super().state_nominal(), [1.0, 30.0, 1e3, 1e3]])
+        crank = [] if self._driven else [1.0, 30.0]
+        return np.concatenate([super().state_nominal(), crank + [1e3, 1e3]])
 
     def _split(self, x):
         if self.compliant:
@@ -171,40 +219,53 @@ class CrankRockerHammer(RockerImpact):
             raise ParameterError(self.model_name, "tool_gap", p.tool_gap,
                                  f">= S theta_start = {p.S * theta:.6g} m (the rocker may not "
                                  f"start inside the tool)")
+        crank = [] if self._driven else [p.phi_start, 0.0]
         x = np.array(([0.0, 0.0] if self.compliant else []) +
-                     [theta, 0.0, 0.0, 0.0, 0.0, 0.0, p.phi_start, 0.0, 0.0, 0.0])
+                     [theta, 0.0, 0.0, 0.0, 0.0, 0.0] + crank + [0.0, 0.0])
         self._d = self._fresh_discrete(c, c0, False)
         return x
 
     def _crank_inertia(self, u) -> float:
         return self.p.J_crank + self.p.gear_ratio ** 2 * u[1]
 
+    def shaft_load(self, x, u) -> tuple[float, float]:
+        """(shaft_tau, shaft_J) at the input shaft: M_rod/i and J_cr/i^2."""
+        i = self.p.gear_ratio
+        return self.rod(x, u)[3] / i, self._crank_inertia(u) / (i * i)
+
     def _support_force(self, u0, v0):
         return self._spring(u0) + self.p.support_damping * v0
 
     def _accelerations(self, x, u, P):
-        _, M_rocker, F_axis, _, _, _ = self.rod(x)
+        _, M_rocker, F_axis, _, _, _ = self.rod(x, u)
         return self._rocker_accelerations(x, P, M_rocker, self.p.J, F_axis)
 
     def derivatives(self, t, x, u):
         p = self.p
         P = self._force(x)
-        F, M_rocker, F_axis, M_crank, _, rate = self.rod(x)
+        F, M_rocker, F_axis, M_crank, _, rate = self.rod(x, u)
         ddu, ddth, _ = self._rocker_accelerations(x, P, M_rocker, p.J, F_axis)
         _, v0, _, om = self._split(x)[:4]
-        w = x[-3]
-        drive = p.gear_ratio * u[0]
+        _, w = self.crank_motion(x, u)
         loss = p.c_rod * rate * rate + (p.support_damping * v0 * v0 if self.compliant else 0.0)
         rocker = [om, ddth, P / self._Z, P, P * P / self._Z, 1.0 if self._d["contact"] else 0.0]
-        crank = [w, (drive + M_crank) / self._crank_inertia(u), drive * w, loss]
+        if self._driven:  # the driver integrates the crank; W_drive: the crank's work on the rod
+            crank = [-M_crank * w, loss]
+        else:
+            drive = p.gear_ratio * u[0]
+            crank = [w, (drive + M_crank) / self._crank_inertia(u), drive * w, loss]
         return ([v0, ddu] if self.compliant else []) + rocker + crank
 
     def mechanical_energy(self, x, u) -> float:
-        """Rocker (own J) and support, contact, crank + motor kinetic energy, rod spring."""
-        w = x[-3]
-        stretch = self.rod(x)[4]
+        """Rocker (own J) and support, contact, crank + motor kinetic energy, rod spring
+        (driven_crank: without the crank's kinetic energy, which the driver carries)."""
+        stretch = self.rod(x, u)[4]
         rocker = super().mechanical_energy(x, np.array([0.0, 0.0]))
-        return rocker + 0.5 * self._crank_inertia(u) * w * w + 0.5 * self.p.k_rod * stretch ** 2
+        crank = 0.0
+        if not self._driven:
+            w = x[-3]
+            crank = 0.5 * self._crank_inertia(u) * w * w
+        return rocker + crank + 0.5 * self.p.k_rod * stretch ** 2
 
     def monitor_functions(self, u_of_t):
         """P' = 0 as in RockerImpact; with the elastic support T' = k(u0) u0' + d0 u0'' = 0,
@@ -223,10 +284,13 @@ class CrankRockerHammer(RockerImpact):
     def _output_dict(self, t, x, u) -> dict:
         out = super()._output_dict(t, x, u)
         p = self.p
-        F, _, _, M_crank, _, _ = self.rod(x)
+        F, _, _, M_crank, _, _ = self.rod(x, u)
         _, _, th, om = self._split(x)[:4]
-        phi, w, W, E_d = x[-4:]
+        phi, w = self.crank_motion(x, u)
+        W, E_d = x[-2:]
+        tau, J = self.shaft_load(x, u)
         out.update(flange_w=p.gear_ratio * w, flange_phi=p.gear_ratio * phi, phi=phi,
                    w_crank=w, theta=th, omega=om, F_rod=F, M_load=-M_crank / p.gear_ratio,
-                   W_drive=W, E_damped=E_d, E_mech=self.mechanical_energy(x, u))
+                   W_drive=W, E_damped=E_d, shaft_tau=tau, shaft_J=J,
+                   E_mech=self.mechanical_energy(x, u))
         return out

@@ -1,0 +1,190 @@
+"""Monolithic RIGID reference for the clutch scenes (induction motor + planetary clutch drive +
+a mechanism whose crank shaft is rigidly the carrier's): scenarios/clutch_hammer.toml and
+scenarios/clutch_mill_stand.toml. One ODE, solved with scipy (DOP853) at rtol 1e-11.
+
+Independent of the mechanisms' driven_crank mode: the mechanism is built in its own,
+INTEGRATING mode (crank states phi, w_crank), and the rigid shaft's load is read from that
+mode's public contract, with the crank states taken from the carrier, phi = phi_start + phi_h/i,
+phi' = w_h/i, and no drive torque (flange_tau = flange_J = 0):
+
+    crank equation of the integrating mode   J_cr(phi) phi'' = i flange_tau + M(phi, phi', ...)
+    so with flange_tau = 0                   M = J_cr(phi) * derivatives(...)[w_crank]
+    the carrier then carries                 flange_tau = M/i,  flange_J = J_cr(phi)/i^2
+
+(J_cr: the hammer's J_crank; the stand's reduced_inertia(phi, 0)). The mechanism's other states
+(rocker, contact, support, energy integrals) take their derivatives from the same call; the work
+of the crank on the mechanism, W_drive of driven_crank, is -M phi'. Every input (motor torque,
+flange_tau, flange_J) is evaluated from the CURRENT state at every right-hand-side and
+event-function call, so the carrier, the shaft and the crank are one rigid body: the rigid
+system's Lagrange equation with no communication step. Events: the drive's (locks, break-frees,
+command edges) and the hammer's contact begin/end, located by solve_ivp; the command table is
+applied at its switching times (integration restarted there, as the drive's on_input_change
+does).
+"""
+from __future__ import annotations
+
+import tomllib
+
+import numpy as np
+
+from crankfmu.runtime.model import PhysicsModel
+from crankfmu.models.rocker_impact.crank_rocker import CrankRockerHammer
+from crankfmu.models.induction_motor.induction_motor import InductionMotor
+from crankfmu.models.mill_stand.mill_stand import MillStandDrive
+from crankfmu.models.planetary_drive.planetary_drive import I_PHI, I_W, PlanetaryClutchDrive
+from crankfmu.system.load import load_scene
+
+N_DRIVE = 9  # the drive's states come first
+NO_DRIVE = np.array([0.0, 0.0])  # flange_tau, flange_J of the integrating mechanism
+
+
+class RigidClutch(PhysicsModel):
+    """drive + mechanism as one ODE; state = drive states + mechanism states without the crank
+    (the crank's two states in the mechanism's vector are filled from the carrier)."""
+
+    solver = "scipy"
+    integrator = "DOP853"
+    max_events_per_step = 10000
+
+    def __init__(self, drive: PlanetaryClutchDrive, motor: InductionMotor, mech: PhysicsModel):
+        super().__init__()
+        self.drive, self.motor, self.mech = drive, motor, mech
+        names = mech.state_names()
+        self.i_phi, self.i_w = names.index("phi"), names.index("w_crank")
+        self.keep = [k for k in range(len(names)) if k not in (self.i_phi, self.i_w)]
+        self.command = 0.0
+        self._kinds = []
+
+    # -- the rigid shaft ------------------------------------------------------------------------
+    def crank(self, X):
+        i = self.mech.p.gear_ratio
+        return self.mech.p.phi_start + X[I_PHI["h"]] / i, X[I_W["h"]] / i
+
+    def mech_state(self, X) -> np.ndarray:
+        x = np.zeros(len(self.mech.state_names()))
+        x[self.keep] = X[N_DRIVE:]
+        x[self.i_phi], x[self.i_w] = self.crank(X)
+        return x
+
+    def crank_inertia(self, phi) -> float:
+        if isinstance(self.mech, MillStandDrive):
+            return float(self.mech.reduced_inertia(phi, 0.0)[0])
+        return self.mech.p.J_crank
+
+    def mech_terms(self, t, X):
+        """(mechanism derivatives without the crank's, M at the crank, J_cr at the crank)."""
+        x = self.mech_state(X)
+        dx = np.asarray(self.mech.derivatives(t, x, NO_DRIVE), dtype=float)
+        J = self.crank_inertia(x[self.i_phi])
+        return dx, J * dx[self.i_w], J
+
+    def drive_inputs(self, t, X) -> np.ndarray:
+        _, M, J = self.mech_terms(t, X)
+        i = self.mech.p.gear_ratio
+        w_a = self.drive.sun_speed(X[:N_DRIVE])
+        return np.array([self.command, self.motor.torque(w_a), self.motor.J_shaft, M / i,
+                         J / (i * i)])
+
+    # -- contract -------------------------------------------------------------------------------
+    def state_names(self):
+        mech = self.mech.state_names()
+        return self.drive.state_names() + tuple(mech[k] for k in self.keep)
+
+    def state_nominal(self):
+        return np.concatenate([self.drive.state_nominal(),
+                               np.asarray(self.mech.state_nominal())[self.keep]])
+
+    def initial_state(self):
+        xd = self.drive.initial_state(np.zeros(5))
+        xm = np.asarray(self.mech.initial_state(NO_DRIVE), dtype=float)
+        X = np.concatenate([xd, xm[self.keep]])
+        return np.concatenate([self.drive.initial_state(self.drive_inputs(0.0, X)), xm[self.keep]])
+
+    def derivatives(self, t, X, u=None):
+        dx, M, _ = self.mech_terms(t, X)
+        dd = self.drive.derivatives(t, X[:N_DRIVE], self.drive_inputs(t, X))
+        dm = dx[self.keep]
+        names = [self.mech.state_names()[k] for k in self.keep]
+        if "W_drive" in names:  # the crank's work on the rod, as driven_crank defines it
+            dm[names.index("W_drive")] = -M * self.crank(X)[1]
+        return np.concatenate([dd, dm])
+
+    def event_functions(self, u_of_t):
+        held = {}
+        drive_events = self.drive.event_functions(lambda s: held["u"])
+        mech_events = self.mech.event_functions(lambda s: NO_DRIVE)
+        self._kinds = [("drive", k) for k in range(len(drive_events))] + \
+            [("mech", k) for k in range(len(mech_events))]
+        wrapped = []
+        for g in drive_events:
+            def wd(t, X, g=g):
+                held["u"] = self.drive_inputs(t, X)
+                return g(t, X[:N_DRIVE])
+            wd.terminal, wd.direction = g.terminal, g.direction
+            wrapped.append(wd)
+        for g in mech_events:
+            def wm(t, X, g=g):
+                return g(t, self.mech_state(X))
+            wm.terminal, wm.direction = g.terminal, g.direction
+            wrapped.append(wm)
+        return wrapped
+
+    def on_event(self, t, X, u, index):
+        X = np.array(X, dtype=float)
+        part, k = self._kinds[index]
+        if part == "drive":
+            X[:N_DRIVE] = self.drive.on_event(t, X[:N_DRIVE], self.drive_inputs(t, X), k)
+        else:
+            X[N_DRIVE:] = np.asarray(self.mech.on_event(t, self.mech_state(X), NO_DRIVE,
+                                                        k))[self.keep]
+        return X
+
+    def output_values(self, t, X, u=None) -> dict:
+        """The drive's and the mechanism's outputs by name (inputs from the state)."""
+        du = self.drive_inputs(t, X)
+        x = self.mech_state(X)
+        out = {"drive." + v.name: y for v, y in
+               zip(self.drive.outputs, self.drive.output_values(t, X[:N_DRIVE], du))}
+        out.update({"mech." + v.name: y for v, y in
+                    zip(self.mech.outputs, self.mech.output_values(t, x, NO_DRIVE))})
+        out["motor.flange_tau"] = du[1]
+        names = [self.mech.state_names()[k] for k in self.keep]
+        if "W_drive" in names:
+            out["mech.W_drive"] = X[N_DRIVE + names.index("W_drive")]
+        return out
+
+
+def from_scene(path, mech_name: str):
+    """(model, command table rows) from the scene file's parameters; the mechanism built
+    without driven_crank (its integrating mode)."""
+    scene = load_scene(path)
+    comp = scene.components
+    motor = InductionMotor(comp["motor"].parameters, comp["motor"].effects)
+    drive = PlanetaryClutchDrive(comp["drive"].parameters, comp["drive"].effects)
+    cls = {"CrankRockerHammer": CrankRockerHammer, "MillStandDrive": MillStandDrive}
+    mc = comp[mech_name]
+    mech = cls[mc.fmu](mc.parameters, [e for e in mc.effects if e != "driven_crank"])
+    table = tomllib.loads(scene.path.read_text())["inputs"]["drive.command"]["table"]
+    return RigidClutch(drive, motor, mech), table
+
+
+def run(path, mech_name: str, t_end: float, names, dt: float = 1e-3, rtol: float = 1e-11):
+    """Samples every dt to t_end: dict name -> array for `names` (drive.*, mech.*,
+    motor.flange_tau) and time."""
+    model, table = from_scene(path, mech_name)
+    switches = {round(t / dt): v for t, v in table}
+    X = model.initial_state()
+    atol = rtol * model.state_nominal()
+    rows = []
+    n = int(round(t_end / dt))
+    for k in range(n + 1):
+        t = k * dt
+        if k in switches:
+            model.command = float(switches[k])
+            X[:N_DRIVE] = model.drive.on_input_change(t, X[:N_DRIVE], model.drive_inputs(t, X))
+        out = model.output_values(t, X)
+        rows.append([t] + [out[name] for name in names])
+        if k < n:
+            X = np.asarray(model.advance(t, X, dt, lambda s: (0.0,), rtol, atol), dtype=float)
+    data = np.array(rows)
+    return {"time": data[:, 0]} | {name: data[:, j + 1] for j, name in enumerate(names)}
