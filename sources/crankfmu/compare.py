@@ -37,6 +37,7 @@ ROLES = ("crank_angle", "crank_speed", "drive_torque", "drive_power")
 OPTIONAL = ("load_torque",)
 NUMBERS = ("from_time",)
 LISTS = ("events",)
+ACCURACY = ("metric",)  # the accuracy metric the scene is judged by (crankfmu.accuracy.metrics)
 
 
 @dataclass
@@ -55,10 +56,11 @@ def analysis_roles(scene) -> dict:
         raise SceneError(scene.path, "[analysis]", "required by compare and sweep: name the "
                          f"variables for {', '.join(ROLES)} (optional: "
                          f"{', '.join(OPTIONAL + NUMBERS + LISTS)})")
-    unknown = set(raw) - set(ROLES + OPTIONAL + NUMBERS + LISTS)
+    allowed = ROLES + OPTIONAL + NUMBERS + LISTS + ACCURACY
+    unknown = set(raw) - set(allowed)
     if unknown:
         raise SceneError(scene.path, f"[analysis].{sorted(unknown)[0]}",
-                         f"unknown key; allowed: {', '.join(ROLES + OPTIONAL + NUMBERS + LISTS)}")
+                         f"unknown key; allowed: {', '.join(allowed)}")
     out = {}
     for role in ROLES + OPTIONAL:
         if role in raw:
@@ -72,8 +74,11 @@ def analysis_roles(scene) -> dict:
     if not isinstance(events, list):
         raise SceneError(scene.path, "[analysis].events", "must be a list of "
                          "\"component.variable\" (values reported at the run's end)")
-    out["events"] = [_variable_ref(scene.path, "[analysis].events", v, scene.components)
-                     for v in events]
+    # an entry is "comp.var" or { variable = "comp.var", per = "comp.counter" } (a figure per
+    # event for the accuracy metric, crankfmu.accuracy.events); here: the variable's end value
+    out["events"] = [_variable_ref(scene.path, "[analysis].events",
+                                   v.get("variable") if isinstance(v, dict) else v,
+                                   scene.components) for v in events]
     return out
 
 
