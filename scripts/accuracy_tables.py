@@ -1,0 +1,95 @@
+"""The accuracy tables of the README: `crankfmu accuracy` with its default grid on every scene.
+
+    PYTHONPATH=sources python scripts/accuracy_tables.py [--out results/accuracy_tables]
+        [--jobs 2] [--scenes hammer,servo_press] [--markdown docs/accuracy_tables.md]
+
+Per scene: the metric it is judged by ([analysis], README "Accuracy"), the cheapest setting in
+wall time for an error of 1e-3 and of 1e-5 (with its doStep calls: timing-free), the observed
+order per master and extrapolation, and where a master becomes unstable (error above 1 or a
+stopped run). Each scene's sweep keeps its runs in OUT/<scene>/runs, so an interrupted run of
+this script resumes. Writes the markdown to --markdown and copies the work-precision plots of
+the scenes in PLOTS to docs/img/<scene>_work_precision.png.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import shutil
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PLOTS = ("servo_press", "planetary_engagement", "hammer")
+TARGETS = (1e-3, 1e-5)
+
+
+def main(argv=None) -> int:
+    from crankfmu.accuracy import AccuracyOptions, cheapest, run_accuracy
+    from crankfmu.scenario import load_scene
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--out", type=Path, default=ROOT / "results" / "accuracy_tables")
+    ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--scenes", help="comma list of scene names (default: every scene)")
+    ap.add_argument("--markdown", type=Path, default=ROOT / "docs" / "accuracy_tables.md")
+    args = ap.parse_args(argv)
+    paths = sorted((ROOT / "scenarios").glob("*.toml"))
+    if args.scenes:
+        wanted = set(args.scenes.split(","))
+        paths = [p for p in paths if p.stem in wanted]
+    sections = []
+    for path in paths:
+        scene = load_scene(path)
+        t0 = time.perf_counter()
+        print(f"== {scene.name}", flush=True)
+        result = run_accuracy(scene, AccuracyOptions(out_dir=args.out / scene.name,
+                                                     jobs=args.jobs, progress=False))
+        wall = time.perf_counter() - t0
+        sections.append(section(scene, result, [cheapest(result.outcomes, t) for t in TARGETS],
+                                wall))
+        print(sections[-1], flush=True)
+        if scene.name in PLOTS:
+            images = ROOT / "docs" / "img"
+            images.mkdir(parents=True, exist_ok=True)
+            shutil.copy(result.png, images / f"{scene.name}_work_precision.png")
+    args.markdown.write_text("\n\n".join(sections) + "\n")
+    print(f"wrote {args.markdown}")
+    return 0
+
+
+def setting_text(o) -> str:
+    if o is None:
+        return "none of the runs"
+    s = o.setting
+    knob = f"tol {s.tolerance:g}" if o.knob == "tolerance" else f"h {s.step:g} s"
+    return (f"{s.algorithm}, extrapolation {s.extrapolation}, {knob}: error {o.error:.1e}, "
+            f"{o.wall_seconds:.2f} s, {o.do_steps} doSteps")
+
+
+def section(scene, result, best, wall: float) -> str:
+    lines = [f"#### {scene.name}",
+             "",
+             f"Metric: {result.metric.describe()}. Default grid, {len(result.outcomes)} runs, "
+             f"{wall:.0f} s for the sweep.",
+             "",
+             "| | cheapest setting (wall time) |", "|---|---|"]
+    lines += [f"| error <= {t:g} | {setting_text(o)} |" for t, o in zip(TARGETS, best)]
+    lines += ["", "| master | extrapolation | observed order | unstable (error > 1 or stopped) |",
+              "|---|---|---|---|"]
+    for (alg, ex, _ft), (order, used, knob) in result.orders.items():
+        group = [o for o in result.outcomes
+                 if (o.setting.algorithm, o.setting.extrapolation) == (alg, ex)]
+        bad = sorted(o.knob_value for o in group if o.unstable)
+        order_text = f"{order:.2f} (vs {knob}, {used} pts)" if math.isfinite(order) else \
+            f"n/a ({used} pts above the floor)"
+        where = f"at {knob} " + ", ".join(f"{v:g}" for v in bad) if bad else "never in the grid"
+        other = [o.status.split(":")[0] for o in group if not o.ok and not o.unstable]
+        if other:
+            where += f" (other: {', '.join(sorted(set(other)))})"
+        lines.append(f"| {alg} | {ex} | {order_text} | {where} |")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
