@@ -88,6 +88,32 @@ def section(scene, result, best, wall: float) -> str:
         if other:
             where += f" (other: {', '.join(sorted(set(other)))})"
         lines.append(f"| {alg} | {ex} | {order_text} | {where} |")
+    if result.metric.name == "events":
+        lines += ["", event_order_table(result)]
+    return "\n".join(lines)
+
+
+EVENT_FLOOR = 1e-12  # relative: below it the figures are round-off of the FMUs' event location
+
+
+def event_order_table(result) -> str:
+    """Observed order of each event figure per master and extrapolation (its own error over the
+    step; errors above EVENT_FLOOR: an event time located by the FMU is exact far below the
+    FMU tolerance, so its coupling error stays visible below the metric's floor)."""
+    from crankfmu.accuracy import observed_order
+
+    labels = [s.label for s in result.metric.events]
+    lines = ["| master | extrapolation | " + " | ".join(f"order of {lb}" for lb in labels) + " |",
+             "|---|---|" + "---|" * len(labels)]
+    for alg, ex, _ft in result.orders:
+        group = [o for o in result.outcomes if o.ok and o.extra.get("events")
+                 and (o.setting.algorithm, o.setting.extrapolation) == (alg, ex)]
+        cells = []
+        for label in labels:
+            order, used = observed_order([o.knob_value for o in group],
+                                         [o.extra["events"][label] for o in group], EVENT_FLOOR)
+            cells.append(f"{order:.2f}" if math.isfinite(order) else "n/a")
+        lines.append(f"| {alg} | {ex} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
