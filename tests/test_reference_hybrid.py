@@ -129,3 +129,31 @@ def test_conventional_press_against_hand_closed_rigid_reference():
     assert np.max(np.abs(w - w_hand)) < 1e-7 * np.max(np.abs(w_hand))
     for k in ("t_lock_b", "t_lock_h"):
         assert hand[k][-1] > 0.0 and abs(rec.column(f"drive.{k}")[-1] - hand[k][-1]) < 1e-7
+
+
+def test_rigidly_driven_press_stops_at_the_forging_window_edges():
+    """With driven_crank the press has no states; its forging-window edges (kinks of M_C) are
+    events on the driver's shaft angle. Over the first stroke (0.9 s) the composed reference
+    stops at both edges, the crank angle there equal to the edge (pi/2 - forging_angle, pi/2)
+    to 1e-9 rad (event location at rtol 1e-10; measured 1e-15)."""
+    import math
+
+    sc = load_scene(SCENARIOS / "conventional_press.toml")
+    model = ComposedModel(sc)
+    model.solver = "scipy"
+    k = model.index["press"]
+    press = model.parts[k].model
+    seen, on_event = [], model.on_event
+
+    def spy(t, x, u, index):
+        if model._event_owner[index][0] == k:
+            seen.append(press.crank_motion((), model.inputs_at(t, np.asarray(x))[k])[0])
+        return on_event(t, x, u, index)
+    model.on_event = spy
+    x, t = model.initial_state(), 0.0
+    for t_next in np.arange(0.05, 0.9001, 0.05):
+        x = model.advance(t, x, t_next - t, lambda s: [], 1e-10, 1e-10 * model.state_nominal())
+        t = t_next
+    edges = [0.5 * math.pi - press.p.forging_angle, 0.5 * math.pi]
+    assert len(seen) == 2
+    assert all(abs(phi - edge) < 1e-9 for phi, edge in zip(seen, edges))

@@ -136,6 +136,7 @@ class PhysicsModel:
     integrator: str = "DOP853"  # solve_ivp's method with solver = "scipy" (model's stiffness)
     _h_next: float | None = None  # dopri5's step size, carried from one advance to the next
     restart_state: Sequence[float] = ()  # the state advance (re)starts from, for event_functions
+    restart_time: float = 0.0  # s, when it (re)starts (set by hosts that need it: the reference)
     _work_left: int | None = None  # right-hand-side calls left in this step (see `step`)
     max_events_per_step: int = 1000
     # Work limit per communication step (as CVODE's mxstep): a diverging coupling can drive a

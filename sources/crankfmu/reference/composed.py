@@ -312,6 +312,7 @@ class ComposedModel(PhysicsModel):
             def u_k(t, k=k):
                 return self.inputs_at(t, current["x"])[k]
             part.model.restart_state = list(self.restart_state)[part.states]
+            part.model.restart_time = self.restart_time  # a driven mechanism's events need it
             for j, g in enumerate(part.model.event_functions(u_k)):
                 events.append(self._wrap_event(g, part.states, current))
                 self._event_owner.append((k, j))
@@ -370,7 +371,7 @@ class ComposedModel(PhysicsModel):
         try:
             x = self.input_changes(t0, x0)
             for _ in range(self.max_events_per_step):
-                self.restart_state = x
+                self.restart_state, self.restart_time = x, t
                 events = self.event_functions(u_of_t)
                 monitors = self.monitor_functions(u_of_t)
                 sol = self.integrate(u_of_t, t, x, t_end, rtol, atol, events + monitors)
