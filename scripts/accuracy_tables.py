@@ -80,7 +80,8 @@ def section(scene, result, best, wall: float) -> str:
              "",
              "| | cheapest setting (wall time) |", "|---|---|"]
     lines += [f"| error <= {t:g} | {setting_text(o)} |" for t, o in zip(TARGETS, best)]
-    lines += ["", "| master | extrapolation | observed order | unstable (error > 1 or stopped) |",
+    lines += ["", "| master | extrapolation | observed order | unstable (error > 1 or stopped); "
+              "event count differs from the reference |",
               "|---|---|---|---|"]
     for (alg, ex, _ft), (order, used, knob) in result.orders.items():
         group = [o for o in result.outcomes
@@ -89,7 +90,11 @@ def section(scene, result, best, wall: float) -> str:
         order_text = f"{order:.2f} (vs {knob}, {used} pts)" if math.isfinite(order) else \
             f"n/a ({used} pts above the floor)"
         where = f"at {knob} " + ", ".join(f"{v:g}" for v in bad) if bad else "never in the grid"
-        other = [o.status.split(":")[0] for o in group if not o.ok and not o.unstable]
+        differ = sorted(o.knob_value for o in group if o.events_differ)
+        if differ:
+            where += f"; event count differs at {knob} " + ", ".join(f"{v:g}" for v in differ)
+        other = [o.status.split(":")[0] for o in group
+                 if not o.ok and not o.unstable and not o.events_differ]
         if other:
             where += f" (other: {', '.join(sorted(set(other)))})"
         lines.append(f"| {alg} | {ex} | {order_text} | {where} |")

@@ -168,3 +168,24 @@ def test_unstable_runs_are_reported_as_such():
     assert "unstable" in format_outcome(o) and _row(o)[5] == "unstable"
     assert s.status.startswith("unstable (stopped): master: state not finite")
     assert not s.ok and _row(s)[5] == "unstable"
+
+
+def test_a_run_with_an_extra_blow_says_so(tmp_path):
+    """A blow more than the reference by the stop time: 'events differ', no number, not
+    'unstable' (the run is stable; its blows drifted)."""
+    from crankfmu.accuracy.metrics import ReferenceSamples, make_metric
+    from crankfmu.accuracy.report import _row
+    from crankfmu.accuracy.sweep import _outcome
+    from crankfmu.studies.executor import RunOutput, RunTask
+
+    ref_cols, run_cols = blows([10.0, 12.0]), blows([10.0, 12.0, 11.0])
+    t_ref, t_run = np.linspace(0, 1, len(ref_cols["h.n"])), np.linspace(0, 1, len(run_cols["h.n"]))
+    ref = ReferenceSamples(t_ref, ref_cols)
+    metric = make_metric("events", ["h.P", "h.n"], events=[EventSpec("h.P", per="h.n")])
+    output = RunOutput(0, "completed", names=["h.P", "h.n"],
+                       rows=np.column_stack([t_run, run_cols["h.P"], run_cols["h.n"]]),
+                       sidecar={"x": 1})
+    o = _outcome(Setting("jacobi", 0, 4e-3, 1e-8, 1e-6), output, RunTask(0, None), metric, ref,
+                 tmp_path, {})
+    assert o.status == "events differ: h.n: 3 events in the run, 2 in the reference"
+    assert o.events_differ and not o.unstable and not o.ok and _row(o)[5] == "events differ"

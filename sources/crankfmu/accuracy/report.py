@@ -13,7 +13,8 @@ COLUMNS = ("algorithm", "extrapolation", "step_s", "fmu_tolerance", "tolerance",
 
 def _row(o: Outcome) -> list:
     s = o.setting
-    error = "unstable" if o.unstable else o.error  # the figure is in the status
+    # no number for these: the figure or the reason is in the status
+    error = "unstable" if o.unstable else "events differ" if o.events_differ else o.error
     return [s.algorithm, s.extrapolation, s.step, s.fmu_tolerance, s.tolerance, error,
             o.wall_seconds, o.do_steps, o.rollbacks, o.communication_steps, o.status]
 
@@ -34,7 +35,8 @@ def format_outcome(o: Outcome) -> str:
     """One table row; an unstable run shows 'unstable', its figure or reason in the status."""
     s = o.setting
     status = o.status if len(o.status) < 60 else o.status[:57] + "..."
-    error = f"{'unstable':>10}" if o.unstable else f"{o.error:>10.3e}"
+    error = f"{'unstable':>10}" if o.unstable else f"{'events ≠':>10}" if o.events_differ \
+        else f"{o.error:>10.3e}"
     return (f"{s.algorithm:<13} {s.extrapolation:>2} {s.step:>9.3g} "
             f"{s.fmu_tolerance:>7.0e} {s.tolerance:>7.0e} {error} "
             f"{o.wall_seconds:>8.3f} {o.do_steps:>8d} {o.rollbacks:>6d}  {status}")

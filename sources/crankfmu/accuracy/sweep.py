@@ -12,7 +12,9 @@ same folder takes the finished runs from there and runs only the rest.
 
 A run whose error exceeds UNSTABLE_ERROR (the coupling error as large as the quantity itself) or
 that stopped (the master or an FMU gave up: diverging states, a step limit) is reported as
-unstable, with the figure in the status, not as an error number to compare.
+unstable, with the figure in the status, not as an error number to compare. A run that counts
+other events than the reference (a blow more or less by the stop time) has no per-event figure
+to compare either: its status says "events differ" and how many each had.
 """
 from __future__ import annotations
 
@@ -31,6 +33,7 @@ from .metrics import Metric, MetricError, ReferenceSamples, observed_order
 
 FLOOR_FACTOR = 10.0  # errors below 10 x the FMUs' tolerance are not coupling errors
 UNSTABLE_ERROR = 1.0  # relative error above which a run has lost the solution (unstable)
+EVENTS_DIFFER = "events differ"  # status of a run that counts other events than the reference
 
 
 @dataclass(frozen=True)
@@ -66,6 +69,10 @@ class Outcome:
     @property
     def unstable(self) -> bool:
         return self.status.startswith("unstable")
+
+    @property
+    def events_differ(self) -> bool:
+        return self.status.startswith(EVENTS_DIFFER)
 
     def to_json(self) -> dict:
         s = self.setting
@@ -302,9 +309,9 @@ def _outcome(setting: Setting, output, task, metric: Metric, ref: ReferenceSampl
         if metric.name == "events":
             details = metric.event_details(t, run, ref)
             outcome.extra["events"] = {d.spec.label: d.error for d in details}
-            reasons = [d.reason for d in details if d.reason]
-            if reasons:
-                outcome.status = f"unstable: {'; '.join(reasons)}"
+            reasons = list(dict.fromkeys(d.reason for d in details if d.reason))
+            if reasons:  # a missed or extra event: no figure to compare (not instability)
+                outcome.status = f"{EVENTS_DIFFER}: {'; '.join(reasons)}"
                 return outcome
         outcome.error = metric.error(t, run, ref)
     except MetricError as err:
