@@ -4,10 +4,10 @@
         [--jobs 2] [--scenes hammer,servo_press] [--markdown docs/accuracy_tables.md]
 
 Per scene, over the default grid of `crankfmu accuracy` extended to steps of 8, 16 and 32 x the
-scene's step (where masters become unstable): the metric it is judged by ([analysis], README "Accuracy"), the cheapest setting in
-wall time for an error of 1e-3 and of 1e-5 (with its doStep calls: timing-free), the observed
-order per master and extrapolation, and where a master becomes unstable (error above 1 or a
-stopped run). Each scene's sweep keeps its runs in OUT/<scene>/runs, so an interrupted run of
+scene's step (where masters become unstable): the metric it is judged by ([analysis], README
+"Accuracy"), the cheapest setting in wall time for an error of 1e-3 and of 1e-5 (with its
+doStep calls: timing-free), the observed order per master and extrapolation (and per event
+figure), and where a master becomes unstable (error above 1 or a stopped run). Each scene's sweep keeps its runs in OUT/<scene>/runs, so an interrupted run of
 this script resumes. Writes the markdown to --markdown and copies the work-precision plots of
 the scenes in PLOTS to docs/img/<scene>_work_precision.png.
 """
