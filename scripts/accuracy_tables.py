@@ -72,11 +72,16 @@ def setting_text(o) -> str:
             f"{o.wall_seconds:.2f} s, {o.do_steps} doSteps")
 
 
+def run_wall(result) -> float:
+    """The runs' own wall times summed (kept runs included: this script resumes)."""
+    return sum(o.wall_seconds for o in result.outcomes if math.isfinite(o.wall_seconds))
+
+
 def section(scene, result, best, wall: float) -> str:
     lines = [f"#### {scene.name}",
              "",
-             f"Metric: {result.metric.describe()}. Default grid, {len(result.outcomes)} runs, "
-             f"{wall:.0f} s for the sweep.",
+             f"Metric: {result.metric.describe()}. {len(result.outcomes)} runs, their wall "
+             f"times summed {run_wall(result):.0f} s.",
              "",
              "| | cheapest setting (wall time) |", "|---|---|"]
     lines += [f"| error <= {t:g} | {setting_text(o)} |" for t, o in zip(TARGETS, best)]
