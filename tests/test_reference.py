@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
+from crankfmu.models.catalog import physics_class
 from crankfmu.reference import ComposedModel, CompositionError, record_times, solve_reference
 from crankfmu.system.load import load_scene
 from crankfmu.system.scene import SceneError, parse_scene
@@ -176,15 +177,31 @@ def test_mill_stand_friction_per_revolution_matches_the_closed_form():
     assert per_rev("stand.E_load") == pytest.approx(4.0 * p["r"] * p["F_roll"], rel=1e-4)
 
 
-def test_models_that_integrate_themselves_are_refused_by_name(tmp_path):
-    scene = scene_from({"scene": {"stop_time": 0.1},
-                        "components": {"rocker": {"fmu": "RockerImpact"}}}, tmp_path)
-    with pytest.raises(CompositionError, match=r"component rocker \(RockerImpact\).*advance\(\)"):
-        ComposedModel(scene)
-    scene = scene_from({"scene": {"stop_time": 0.1},
-                        "components": {"drive": {"fmu": "PlanetaryClutchDrive"}}}, tmp_path)
-    with pytest.raises(CompositionError, match=r"component drive \(PlanetaryClutchDrive\)"):
-        ComposedModel(scene)
+def test_models_that_integrate_themselves_are_refused_by_name():
+    """A model whose advance() does more than the hybrid contract, or that has an
+    on_input_change without declaring the contract, is refused; the shipped hybrid models
+    declare it (advance_follows_contract) and compose (tests/test_reference_hybrid.py)."""
+    from crankfmu.runtime.model import PhysicsModel
+    from crankfmu.reference.composed import _check_composable
+
+    class Opaque(PhysicsModel):
+        model_name = "Opaque"
+
+        def advance(self, t0, x0, h, u_of_t, rtol, atol):
+            return x0
+
+    class Discrete(PhysicsModel):
+        model_name = "Discrete"
+
+        def on_input_change(self, t, x, u):
+            return x
+
+    with pytest.raises(CompositionError, match=r"component a \(Opaque\).*advance\(\)"):
+        _check_composable(Opaque, "a")
+    with pytest.raises(CompositionError, match=r"component b \(Discrete\).*on_input_change"):
+        _check_composable(Discrete, "b")
+    for name in ("RockerImpact", "PlanetaryClutchDrive", "CrankRockerHammer"):
+        _check_composable(physics_class(name), name)
 
 
 def test_fmu_files_are_refused(tmp_path):
@@ -235,6 +252,6 @@ def test_reference_command_writes_the_run_layout(tmp_path, capsys):
     assert out.with_suffix(".json").is_file()
     bad = tmp_path / "bad.toml"
     bad.write_text((SCENARIOS / "servo_press.toml").read_text().replace(
-        'fmu = "StephensonPress"', 'fmu = "RockerImpact"'))
+        'fmu = "StephensonPress"', 'fmu = "press.fmu"'))
     assert main(["reference", str(bad), "--out", str(tmp_path / "x.csv")]) == 2
-    assert "cannot be composed" in capsys.readouterr().err
+    assert "composes catalog physics models only" in capsys.readouterr().err

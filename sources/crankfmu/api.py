@@ -178,7 +178,9 @@ def accuracy(scene, *, out=None, stop_time=None, parameters=None, inputs=None, *
     """Error against the monolithic reference and wall time per master setting
     (crankfmu.studies.accuracy.run_accuracy; `options` are AccuracyOptions' fields: algorithms,
     extrapolations, steps, tolerances, fmu_tolerances, metric, variables, cycles, target,
-    reference_rtol, fmu_dir, progress, jobs, scheduler, executor). `out`: the folder to write
+    reference_rtol, reference_csv (a reference from elsewhere, in the CSV layout of a run),
+    report (report(outcome, kept) as each run finishes), resume, fmu_dir, progress, jobs,
+    scheduler, executor). `out`: the folder to write
     (accuracy.csv, work_precision.png, the runs); without it they go to a temporary folder
     that is removed, and the result's paths are None."""
     from .studies.accuracy import AccuracyOptions, run_accuracy

@@ -3,7 +3,9 @@
 Sweeps algorithm x extrapolation x communication step (x FMU tolerance), compares every run with
 the monolithic reference (solved once, cached in --out DIR), and prints a table, the observed
 convergence orders and the cheapest setting meeting --target; writes accuracy.csv and
-work_precision.png into --out DIR.
+work_precision.png into --out DIR. Each run is printed as it finishes (under a progress bar
+over the runs) and kept in --out DIR/runs, so a sweep started again resumes where it stopped
+(--fresh runs everything again). --reference FILE.csv takes the reference from elsewhere.
 """
 from __future__ import annotations
 
@@ -46,10 +48,20 @@ def register(sub) -> None:
                    help="FMU internal tolerances to sweep (default: the scene's fmu_tolerance)")
     p.add_argument("--target", type=float, default=DEFAULT_TARGET,
                    help=f"accuracy to meet, in the metric's units (default {DEFAULT_TARGET:g})")
-    p.add_argument("--metric", choices=METRICS, default="max",
-                   help="max (default): max over time of |y - y_ref|/mean|y_ref| of --variables; "
-                        "steady: rel. error of mean crank speed and of delta over the last "
-                        "--cycles whole revolutions (needs C.phi, C.w_crank recorded)")
+    p.add_argument("--metric", choices=METRICS,
+                   help="default: the scene's [analysis].metric, else events if the scene has "
+                        "[analysis].events, else max. max: max over time of "
+                        "|y - y_ref|/mean|y_ref| of --variables; steady: rel. error of mean "
+                        "crank speed and of delta over the last --cycles whole revolutions "
+                        "(needs C.phi, C.w_crank recorded); events: the largest rel. error of "
+                        "the [analysis].events figures (event times, per-event peaks)")
+    p.add_argument("--reference", type=Path, metavar="FILE.csv",
+                   help="reference from elsewhere (another tool, a finer run) in the CSV "
+                        "layout of crankfmu run: time, then \"component.variable\" columns "
+                        "(default: crankfmu's monolithic reference, solved and cached)")
+    p.add_argument("--fresh", action="store_true",
+                   help="run every setting again (default: keep the finished runs found in "
+                        "--out DIR/runs from an earlier, interrupted sweep)")
     p.add_argument("--variables", type=_names,
                    help="recorded variables of the metric (default: the *.w_crank ones, else all)")
     p.add_argument("--cycles", type=int, default=1, help="revolutions of metric steady")
@@ -77,7 +89,8 @@ def run_accuracy_command(args) -> int:
         fmu_tolerances=args.fmu_tolerances, metric=args.metric, variables=args.variables,
         cycles=args.cycles, target=args.target, reference_rtol=args.rtol,
         floor_factor=args.floor_factor, fmu_dir=args.fmus,
-        progress=False if args.no_progress else None, jobs=args.jobs, scheduler=args.scheduler)
+        progress=False if args.no_progress else None, jobs=args.jobs, scheduler=args.scheduler,
+        reference_csv=args.reference, resume=not args.fresh, report=_printer())
     if args.tolerances:
         options.tolerances = args.tolerances
     problem = _check_options(options)
@@ -89,14 +102,33 @@ def run_accuracy_command(args) -> int:
     except (CompositionError, MetricError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
+    from ..studies.accuracy.report import format_events
     print(f"{scene.name}: error = {result.metric.describe()}")
     print(f"reference: {result.reference_csv}" + (" (cached)" if result.reference_cached else ""))
     print(format_table(result.outcomes))
+    events = format_events(result.outcomes)
+    if events:
+        print(events)
     print(format_orders(result.orders))
     _print_choice("cheapest in wall time", result.cheapest, args.target)
     _print_choice("fewest doStep calls", result.fewest_steps, args.target)
     print(f"wrote {result.csv}, {result.png}")
     return 0
+
+
+def _printer():
+    """report(outcome, kept): one table row per run as it finishes, above the progress bar."""
+    from ..studies.accuracy.report import TABLE_HEAD, format_outcome
+    printed = []
+
+    def report(outcome, kept: bool) -> None:
+        from tqdm import tqdm
+        if not printed:
+            tqdm.write(TABLE_HEAD)
+            printed.append(True)
+        tqdm.write(format_outcome(outcome) + ("  (kept from an earlier sweep)" if kept else ""))
+        sys.stdout.flush()
+    return report
 
 
 def _check_options(o) -> str | None:

@@ -257,7 +257,7 @@ def _run(scene, options, out, log, fmus, system, master, recorder, readers, inte
 def plot_roles(scene: Scene) -> dict | None:
     """The scene's [analysis] roles (crank angle, speed, torques) for the steady-state plot;
     None without a complete [analysis] table."""
-    from ..studies.compare import analysis_roles
+    from ..system.analysis import analysis_roles
     try:
         return analysis_roles(scene) if "analysis" in scene.raw else None
     except SceneError:

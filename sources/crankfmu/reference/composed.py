@@ -20,10 +20,25 @@ Events: each component's `event_functions` are wrapped to see its part of the st
 inputs as they follow from the whole state at the event time; `on_event` is routed back.
 Discrete states are kept per component.
 
+Hybrid models compose through their contract (`advance_follows_contract`, runtime/model.py):
+their terminal events (locks, break-frees, contact start and end, forging-window edges) are
+located by the solver with the inputs following the whole state (no hold); their non-terminal
+`monitor_functions` (force extrema) are located too and handed to `observe`, as the state at
+every restart is; `on_input_change` runs at every restart (record times and the time points of
+[inputs] tables), where the FMU runs it at every communication point: in the composed ODE the
+inputs are continuous between those restarts, so it only acts where an input table jumps.
+A step-interpolated [inputs] table is held at its value at the restart over the whole
+integration, so its jump is seen at the restart, never a rounding error before it.
+
+Rigid couplings (a mechanism with effect `driven_crank`: no crank states, its shaft_tau and
+shaft_J are feedthrough of shaft_phi/shaft_w, integrated by the driver) need nothing special:
+the plan evaluates the driver's shaft outputs, then the mechanism's load, then the driver's
+derivatives, so the driver and the mechanism are one body in the composed ODE.
+
 Models that cannot be composed: those that override `advance` with more than an integrator of
-their own derivatives (e.g. monitors or discrete logic inside the step; the linear models'
-exact matrix exponential is fine, see EXACT_ADVANCE), and those with `on_input_change` (their discrete update
-at communication points is a co-simulation concept with no monolithic equivalent here).
+their own derivatives without declaring advance_follows_contract (the linear models' exact
+matrix exponential is fine, see EXACT_ADVANCE), and those with `on_input_change` that do not
+declare it either (their discrete update would be skipped).
 """
 from __future__ import annotations
 
@@ -84,6 +99,8 @@ def _check_composable(cls, name: str) -> None:
     owner = _advance_owner(cls)
     exact = getattr(owner, "advance_integrates_derivatives", False) or \
         f"{owner.__module__.rsplit('.', 1)[-1]}.{owner.__qualname__}" in EXACT_ADVANCE
+    if getattr(cls, "advance_follows_contract", False):
+        return
     if owner is not PhysicsModel and not exact:
         raise CompositionError(
             f"component {name} ({cls.model_name}) cannot be composed into a monolithic "
@@ -102,6 +119,7 @@ class ComposedModel(PhysicsModel):
     model_name = "Composed"
     description = "monolithic composition of a scene's physics models"
     max_derivative_calls_per_step = 10_000_000
+    max_events_per_step = 100_000  # per record interval: a hammer's contacts and monitors
 
     def __init__(self, scene: Scene):
         super().__init__()
@@ -115,6 +133,8 @@ class ComposedModel(PhysicsModel):
         self.plan = self._plan(self.needed)
         self.integrator = "DOP853"  # solve_reference picks Radau when choose_integrator says so
         self.n_rhs = 0
+        self.n_events = 0
+        self._hold_time = None  # restart time at which step-interpolated inputs are read
 
     # -- construction -----------------------------------------------------------------------
     def _parts(self, models: dict) -> list[Part]:
@@ -212,15 +232,21 @@ class ComposedModel(PhysicsModel):
             outs[k] = part.model.output_values(t, xs[k], us[k])
         return [self._fill(p, t, outs) for p in self.parts]
 
-    @staticmethod
-    def _fill(part: Part, t: float, outs) -> np.ndarray:
+    def _held_time(self, signal, t: float) -> float:
+        """A step table is read at the restart time while an integration runs (see the module
+        docstring), any other signal at t."""
+        if self._hold_time is not None and signal.interpolation == "step":
+            return self._hold_time
+        return t
+
+    def _fill(self, part: Part, t: float, outs) -> np.ndarray:
         u = np.empty(len(part.sources))
         for i, src in enumerate(part.sources):
             if src[0] == "link":
                 y = outs[src[1]]
                 u[i] = y[src[2]] if y is not None else np.nan
             elif src[0] == "external":
-                u[i] = src[1].value_at(t)
+                u[i] = src[1].value_at(self._held_time(src[1], t))
             else:
                 u[i] = src[1]
         return u
@@ -280,12 +306,13 @@ class ComposedModel(PhysicsModel):
 
     def event_functions(self, u_of_t):
         """The components' events, each seeing its own states and its inputs at the event."""
-        current = {}
+        current = {"x": np.asarray(self.restart_state, dtype=float)}
         events, self._event_owner = [], []
         for k, part in enumerate(self.parts):
             def u_k(t, k=k):
                 return self.inputs_at(t, current["x"])[k]
             part.model.restart_state = list(self.restart_state)[part.states]
+            part.model.restart_time = self.restart_time  # a driven mechanism's events need it
             for j, g in enumerate(part.model.event_functions(u_k)):
                 events.append(self._wrap_event(g, part.states, current))
                 self._event_owner.append((k, j))
@@ -299,6 +326,74 @@ class ComposedModel(PhysicsModel):
         wrapped.terminal = getattr(g, "terminal", False)
         wrapped.direction = getattr(g, "direction", 0.0)
         return wrapped
+
+    def monitor_functions(self, u_of_t=None) -> list:
+        """The components' non-terminal monitors (force extrema), wrapped like the events."""
+        current = {"x": np.asarray(self.restart_state, dtype=float)}
+        monitors, self._monitor_owner = [], []
+        for k, part in enumerate(self.parts):
+            if not hasattr(part.model, "monitor_functions"):
+                continue
+            def u_k(t, k=k):
+                return self.inputs_at(t, current["x"])[k]
+            for g in part.model.monitor_functions(u_k):
+                wrapped = self._wrap_event(g, part.states, current)
+                wrapped.terminal = False
+                monitors.append(wrapped)
+                self._monitor_owner.append(k)
+        return monitors
+
+    def observe(self, t: float, x) -> None:
+        """Hand (t, x) to every component that folds observations into its discrete state."""
+        x = np.asarray(x, dtype=float)
+        us = None
+        for k, part in enumerate(self.parts):
+            if hasattr(part.model, "observe"):
+                us = self.inputs_at(t, x) if us is None else us
+                part.model.observe(t, x[part.states], us[k])
+
+    def input_changes(self, t: float, x) -> np.ndarray:
+        """Each component's on_input_change at a restart, with its inputs from the whole state."""
+        x = np.array(x, dtype=float)
+        for k, part in enumerate(self.parts):
+            if hasattr(part.model, "on_input_change"):
+                u_k = self.inputs_at(t, x)[k]
+                x[part.states] = part.model.on_input_change(t, x[part.states], u_k)
+        return x
+
+    def advance(self, t0, x0, h, u_of_t, rtol, atol):
+        """The hybrid contract for the whole scene: input changes at t0, then integration with
+        the components' terminal events (on_event, restart) and monitors (observe)."""
+        if h <= 0.0:
+            return np.array(x0, dtype=float)
+        t, t_end = t0, t0 + h
+        self._hold_time = t0
+        try:
+            x = self.input_changes(t0, x0)
+            for _ in range(self.max_events_per_step):
+                self.restart_state, self.restart_time = x, t
+                events = self.event_functions(u_of_t)
+                monitors = self.monitor_functions(u_of_t)
+                sol = self.integrate(u_of_t, t, x, t_end, rtol, atol, events + monitors)
+                for i, te, xe in sol.crossings:
+                    if i >= len(events):
+                        k = self._monitor_owner[i - len(events)]
+                        part = self.parts[k]
+                        part.model.observe(te, np.asarray(xe)[part.states],
+                                           self.inputs_at(te, np.asarray(xe))[k])
+                if sol.status == 0:
+                    self.observe(t_end, sol.x)
+                    return np.array(sol.x, dtype=float)
+                t = sol.t
+                self.n_events += 1
+                x = self.on_event(t, sol.x, None, sol.event)
+                if t >= t_end:
+                    self.observe(t, x)
+                    return x
+        finally:
+            self._hold_time = None
+        raise CompositionError(f"{self.scene.path}: more than {self.max_events_per_step} events "
+                               f"between t = {t0:.9g} s and {t_end:.9g} s (chattering?)")
 
     def on_event(self, t, x, u, index):
         k, j = self._event_owner[index]

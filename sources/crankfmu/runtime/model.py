@@ -40,6 +40,13 @@ Optional (hybrid models)
                                    advance_integrates_derivatives = True when it solves
                                    derivatives() exactly, so the monolithic reference may
                                    compose the model).
+    advance_follows_contract       True when an overriding advance() does nothing but what the
+                                   hybrid contract below says, so the monolithic reference
+                                   composes the model through that contract:
+    on_input_change(t, x, u)       discrete update at the start of every advance (inputs that
+                                   may have jumped since the last one); returns the new x.
+    monitor_functions(u_of_t)      non-terminal events (e.g. force extrema) whose crossings
+    observe(t, x, u)               are handed to observe(), as is the state at every step end.
 
 Inputs reach `advance` as a callable u_of_t(t) -> input vector, so a master may hand over an
 input polynomial (extrapolation) instead of a held value; from the FMU it is an
@@ -129,12 +136,16 @@ class PhysicsModel:
     integrator: str = "DOP853"  # solve_ivp's method with solver = "scipy" (model's stiffness)
     _h_next: float | None = None  # dopri5's step size, carried from one advance to the next
     restart_state: Sequence[float] = ()  # the state advance (re)starts from, for event_functions
+    restart_time: float = 0.0  # s, when it (re)starts (set by hosts that need it: the reference)
     _work_left: int | None = None  # right-hand-side calls left in this step (see `step`)
     max_events_per_step: int = 1000
     # Work limit per communication step (as CVODE's mxstep): a diverging coupling can drive a
     # state so far that integrating one step would take hours; failing fast lets the master
     # report where and when it happened.
     max_derivative_calls_per_step: int = 200_000
+    # advance() overridden only to run the hybrid contract (on_input_change, event_functions,
+    # monitor_functions/observe): see the module docstring; the monolithic reference relies on it
+    advance_follows_contract: bool = False
 
     def __init__(self, parameters: dict | None = None, effects: Sequence[str] | dict | None = None):
         values = {v.name: float(v.start) for v in self.parameters}

@@ -33,10 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROLES = ("crank_angle", "crank_speed", "drive_torque", "drive_power")
-OPTIONAL = ("load_torque",)
-NUMBERS = ("from_time",)
-LISTS = ("events",)
+from ..system.analysis import LISTS, NUMBERS, analysis_roles
 
 
 @dataclass
@@ -45,36 +42,6 @@ class Series:
     time: np.ndarray
     values: dict[str, np.ndarray]  # role -> samples
     from_time: float
-
-
-def analysis_roles(scene) -> dict:
-    """The [analysis] table of `scene`, checked: role -> variable, plus from_time."""
-    from ..system.scene import SceneError, _variable_ref
-    raw = scene.raw.get("analysis")
-    if not isinstance(raw, dict):
-        raise SceneError(scene.path, "[analysis]", "required by compare and sweep: name the "
-                         f"variables for {', '.join(ROLES)} (optional: "
-                         f"{', '.join(OPTIONAL + NUMBERS + LISTS)})")
-    unknown = set(raw) - set(ROLES + OPTIONAL + NUMBERS + LISTS)
-    if unknown:
-        raise SceneError(scene.path, f"[analysis].{sorted(unknown)[0]}",
-                         f"unknown key; allowed: {', '.join(ROLES + OPTIONAL + NUMBERS + LISTS)}")
-    out = {}
-    for role in ROLES + OPTIONAL:
-        if role in raw:
-            out[role] = _variable_ref(scene.path, f"[analysis].{role}", raw[role],
-                                      scene.components)
-        elif role in ROLES:
-            raise SceneError(scene.path, f"[analysis].{role}", "required by compare and sweep: "
-                             "the recorded variable (\"component.variable\") with this role")
-    out["from_time"] = float(raw.get("from_time", scene.start_time))
-    events = raw.get("events", [])
-    if not isinstance(events, list):
-        raise SceneError(scene.path, "[analysis].events", "must be a list of "
-                         "\"component.variable\" (values reported at the run's end)")
-    out["events"] = [_variable_ref(scene.path, "[analysis].events", v, scene.components)
-                     for v in events]
-    return out
 
 
 def role_variables(roles: dict) -> dict:

@@ -83,6 +83,9 @@ class PlanetaryClutchDrive(PhysicsModel):
                    "working stroke, stopping, idle; stick-slip locking")
     seed = "planetary_drive_friction_clutch.txt, eq. (1)-(10)"
     integrator = "DOP853"
+    # advance() = on_input_change at the step start + the base event loop (the composed
+    # reference does the same at every restart)
+    advance_follows_contract = True
 
     parameters = (
         Variable("r_a", "m", "Pitch radius of the sun gear a", 0.10, min=0.0),

@@ -55,6 +55,9 @@ class RockerImpact(PhysicsModel):
     seed = "rocker_impact_unit.txt, eq. (1)-(2), (5)-(8); MO-100 data"
     integrator = "DOP853"   # oscillatory, not stiff: k1, k2 ~ 1e4 rad/s, no fast decay
     max_events_per_step = 10000
+    # advance() = the event loop with the contact switch terminal, the force extrema as
+    # monitor_functions handed to observe(), and observe() at the step end
+    advance_follows_contract = True
 
     parameters = (
         Variable("J", "kg.m2", "Rocker moment of inertia about the pivot axis", 0.734, min=0.0),

@@ -232,20 +232,41 @@ class StephensonPress(PhysicsModel):
         Two events: the next edge ahead of the restart angle (crossed upwards) and the last one
         behind it (crossed downwards, if the crank turns back); an edge within EDGE_BAND of the
         restart angle is the one just passed and does not count."""
-        if not self._forging or self._driven:
+        if not self._forging:
             return []
+        if self._driven:
+            return self._driven_edge_events(u_of_t)
         phi = self.restart_state[0]
         band = EDGE_BAND * max(1.0, abs(phi))
         cached = self._edge_events[0]
         if cached and cached[1] + band < phi < cached[0] - band:
             return self._edge_events[1]
+        pair = self._edge_pair(phi, band)
+        self._edge_events = (pair, [_crossing(pair[0], +1), _crossing(pair[1], -1)])
+        return self._edge_events[1]
+
+    def _edge_pair(self, phi: float, band: float) -> tuple[float, float]:
+        """The next forging-window edge ahead of phi and the last one behind it (outside band)."""
         start = 0.5 * math.pi - self.p.forging_angle
         edges = [e + 2 * math.pi * k for k in (math.floor((phi - start) / (2 * math.pi)) + j
                                               for j in (-1, 0, 1))
                  for e in (start, start + self.p.forging_angle)]
-        pair = (min(e for e in edges if e > phi + band), max(e for e in edges if e < phi - band))
-        self._edge_events = (pair, [_crossing(pair[0], +1), _crossing(pair[1], -1)])
-        return self._edge_events[1]
+        return (min(e for e in edges if e > phi + band), max(e for e in edges if e < phi - band))
+
+    def _driven_edge_events(self, u_of_t):
+        """With driven_crank the crank angle is an input (the driver's shaft): the same two
+        edges, as functions of the input at the event time. Only a host that integrates the
+        driver with this model (the monolithic reference, which sets restart_time) asks for
+        them: the FMU has no states in this mode, so its advance never looks for events."""
+        phi = self.crank_motion((), u_of_t(self.restart_time))[0]
+        pair = self._edge_pair(phi, EDGE_BAND * max(1.0, abs(phi)))
+
+        def crossing(angle, direction):
+            def g(t, x):
+                return self.crank_motion((), u_of_t(t))[0] - angle
+            g.terminal, g.direction = True, direction
+            return g
+        return [crossing(pair[0], +1), crossing(pair[1], -1)]
 
     def output_values(self, t, x, u):
         phi, w = self.crank_motion(x, u)

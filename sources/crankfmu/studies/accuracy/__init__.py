@@ -10,11 +10,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .metrics import METRICS, Metric, MetricError, make_metric, observed_order, steady_figures
-from .report import format_orders, format_table, plot_work_precision, write_table_csv
-from .sweep import (FLOOR_FACTOR, Outcome, Setting, cheapest, fewest_steps, is_variable_step,
-                    load_or_solve_reference, orders, reference_grid, run_one, run_settings,
-                    settings_for)
+from .events import EventError, EventSpec, event_error, event_errors, parse_event_specs
+from .metrics import (METRICS, Metric, MetricError, make_metric, observed_order, scene_event_specs,
+                      scene_metric_name, steady_figures)
+from .report import (format_orders, format_outcome, format_table, plot_work_precision,
+                     write_table_csv)
+from .sweep import (FLOOR_FACTOR, UNSTABLE_ERROR, Outcome, Setting, cheapest, fewest_steps,
+                    is_variable_step, load_or_solve_reference, orders, read_reference_file,
+                    reference_grid, resume_key, run_one, run_settings, settings_for)
 
 DEFAULT_STEP_FACTORS = (4.0, 2.0, 1.0, 0.5)          # x the scene's step
 DEFAULT_TOLERANCES = (1e-2, 1e-3, 1e-4)              # a variable-step master's sweep
@@ -34,7 +37,10 @@ class AccuracyOptions:
     steps: list[float] | None = None           # default: DEFAULT_STEP_FACTORS x scene step
     tolerances: list[float] = field(default_factory=lambda: list(DEFAULT_TOLERANCES))
     fmu_tolerances: list[float] | None = None  # default: the scene's
-    metric: str = "max"
+    metric: str | None = None                  # default: the scene's (scene_metric_name)
+    reference_csv: Path | None = None          # a reference from elsewhere, run CSV layout
+    report: object | None = None               # report(outcome, kept) as each run finishes
+    resume: bool = True                        # take finished runs from out_dir/runs
     variables: list[str] | None = None
     cycles: int = 1
     target: float = DEFAULT_TARGET
@@ -61,9 +67,16 @@ class AccuracyResult:
 
 
 def run_accuracy(scene, options: AccuracyOptions) -> AccuracyResult:
+    import copy
+
     from ...cosim.masters import MASTERS
 
-    metric = make_metric(options.metric, scene.record, options.variables, options.cycles)
+    specs = scene_event_specs(scene)
+    name = options.metric or scene_metric_name(scene)
+    if name == "events":  # the event figures are recorded by the runs and the reference
+        scene = copy.deepcopy(scene)
+        scene.record = list(dict.fromkeys(scene.record + [v for s in specs for v in s.needs]))
+    metric = make_metric(name, scene.record, options.variables, options.cycles, specs)
     settings = settings_for(
         scene, options.algorithms or list(MASTERS), options.extrapolations,
         options.steps or [f * scene.master.step for f in DEFAULT_STEP_FACTORS],
@@ -72,13 +85,14 @@ def run_accuracy(scene, options: AccuracyOptions) -> AccuracyResult:
         settings = [s for s in settings if not _excluded_by_default(s)]
     out = Path(options.out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    ref, ref_csv, cached = load_or_solve_reference(scene, reference_grid(scene, settings), out,
-                                                   options.reference_rtol, options.progress)
+    ref, ref_csv, cached, ref_key = _reference(scene, settings, metric, out, options)
     from ..executor import make_executor
     executor = options.executor or make_executor(options.jobs, options.scheduler)
     try:
         outcomes = run_settings(scene, settings, metric, ref, options.fmu_dir, out / "runs",
-                                executor, options.progress, f"{scene.name} accuracy sweep")
+                                executor, options.progress, f"{scene.name} accuracy sweep",
+                                options.report,
+                                resume_key(ref_key, metric) if options.resume else None)
     finally:
         if options.executor is None:
             executor.close()
@@ -93,11 +107,28 @@ def run_accuracy(scene, options: AccuracyOptions) -> AccuracyResult:
                           png)
 
 
+def _reference(scene, settings, metric: Metric, out: Path, options: AccuracyOptions):
+    """(samples, csv, cached, key): the reference file given, or crankfmu's own (cached)."""
+    import hashlib
+    import json
+
+    if options.reference_csv is not None:
+        path = Path(options.reference_csv)
+        ref = read_reference_file(path, metric.variables, scene.start_time, scene.stop_time)
+        return ref, path, False, hashlib.sha256(path.read_bytes()).hexdigest()
+    ref, csv, cached = load_or_solve_reference(scene, reference_grid(scene, settings), out,
+                                               options.reference_rtol, options.progress)
+    key = json.loads(csv.with_suffix(".json").read_text()).get("cache_key", "")
+    return ref, csv, cached, key
+
+
 def _excluded_by_default(setting: Setting) -> bool:
     kind = "variable-step" if is_variable_step(setting.algorithm) else setting.algorithm
     return (kind, setting.extrapolation) in DEFAULT_GRID_EXCLUDES
 
 
-__all__ = ["AccuracyOptions", "AccuracyResult", "METRICS", "Metric", "MetricError", "Outcome",
-           "Setting", "cheapest", "fewest_steps", "format_orders", "format_table",
-           "make_metric", "observed_order", "orders", "run_accuracy", "steady_figures"]
+__all__ = ["AccuracyOptions", "AccuracyResult", "EventError", "EventSpec", "METRICS", "Metric",
+           "MetricError", "Outcome", "Setting", "UNSTABLE_ERROR", "cheapest", "event_error",
+           "event_errors", "fewest_steps", "format_orders", "format_outcome", "format_table",
+           "make_metric", "observed_order", "orders", "parse_event_specs", "run_accuracy",
+           "scene_event_specs", "scene_metric_name", "steady_figures"]

@@ -9,6 +9,13 @@ so sampling effects are the same on both sides and only the coupling error remai
     steady  over the last `cycles` whole crank revolutions (needs `C.phi` and `C.w_crank` of one
             component recorded): the larger of the relative errors of the mean crank speed
             2 pi n / T_n and of the non-uniformity delta = (w_max - w_min) / w_mean.
+    events  the largest error over the scene's [analysis].events entries (event times, event
+            quantities, per-event figures; accuracy/events.py), each taken on the run's and the
+            reference's own grids. The default metric of a scene whose [analysis] says
+            metric = "events".
+
+`scene_metric_name(scene)` is the metric a scene is judged by when none is asked for:
+[analysis].metric if given, else "events" if [analysis].events is given, else "max".
 """
 from __future__ import annotations
 
@@ -17,8 +24,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .events import EventError, EventSpec, EventSpecError, event_errors, parse_event_specs
+
 TWO_PI = 2.0 * math.pi
-METRICS = ("max", "steady")
+METRICS = ("max", "steady", "events")
 
 
 class MetricError(ValueError):
@@ -53,14 +62,30 @@ class Metric:
     name: str
     variables: list[str]
     cycles: int = 1
+    events: list[EventSpec] | None = None
 
     def describe(self) -> str:
+        if self.name == "events":
+            return "max over the event figures of their relative error: " + \
+                "; ".join(s.label for s in self.events)
         if self.name == "max":
             return f"max_t |y - y_ref| / mean|y_ref| over {', '.join(self.variables)}"
         return (f"max(rel. error of mean speed, rel. error of delta) over the last "
                 f"{self.cycles} revolution(s) of {self.variables[0].rsplit('.', 1)[0]}")
 
+    def event_details(self, t: np.ndarray, run: dict[str, np.ndarray],
+                      ref: ReferenceSamples) -> list[EventError]:
+        """Per [analysis].events entry, the run's and the reference's figures and the error
+        (each on its own record grid; both must end at the same time)."""
+        t_end, t_ref_end = float(t[-1]), float(ref.times[-1])
+        if abs(t_end - t_ref_end) > 1e-9 * max(1.0, abs(t_end)):
+            raise MetricError(f"the reference ends at t = {t_ref_end:g} s, the run at "
+                              f"{t_end:g} s: event figures need both over the same span")
+        return event_errors(self.events, run, ref.columns)
+
     def error(self, t: np.ndarray, run: dict[str, np.ndarray], ref: ReferenceSamples) -> float:
+        if self.name == "events":
+            return max((e.error for e in self.event_details(t, run, ref)), default=0.0)
         if self.name == "max":
             return max(_max_relative(run[v], ref.at(v, t)) for v in self.variables)
         phi_name, w_name = self.variables
@@ -69,10 +94,36 @@ class Metric:
         return max(abs(a / b - 1.0) for a, b in zip(mine, theirs))
 
 
+def scene_event_specs(scene) -> list[EventSpec]:
+    """The scene's [analysis].events as EventSpecs; a bad entry is a MetricError naming the
+    scene file and the key."""
+    raw = scene.raw.get("analysis") or {}
+    try:
+        return parse_event_specs(raw.get("events"))
+    except EventSpecError as err:
+        raise MetricError(f"{scene.path}: {err}") from None
+
+
+def scene_metric_name(scene) -> str:
+    """The metric the scene is judged by (see the module docstring)."""
+    raw = scene.raw.get("analysis") or {}
+    name = raw.get("metric", "events" if raw.get("events") else "max")
+    if name not in METRICS:
+        raise MetricError(f"{scene.path}: [analysis].metric = {name!r}; allowed: "
+                          f"{', '.join(METRICS)}")
+    return name
+
+
 def make_metric(name: str, recorded: list[str], variables: list[str] | None = None,
-                cycles: int = 1) -> Metric:
+                cycles: int = 1, events: list[EventSpec] | None = None) -> Metric:
     if name not in METRICS:
         raise MetricError(f"unknown metric {name!r}; metrics: {', '.join(METRICS)}")
+    if name == "events":
+        if not events:
+            raise MetricError("metric events needs [analysis].events in the scene: event "
+                              "times or quantities (\"comp.var\") or per-event figures "
+                              "({ variable = \"comp.var\", per = \"comp.counter\" })")
+        return Metric("events", [v for s in events for v in s.needs], cycles, events)
     for v in variables or []:
         if v not in recorded:
             raise MetricError(f"--variables: {v} is not recorded; [record].variables: "

@@ -13,7 +13,9 @@ COLUMNS = ("algorithm", "extrapolation", "step_s", "fmu_tolerance", "tolerance",
 
 def _row(o: Outcome) -> list:
     s = o.setting
-    return [s.algorithm, s.extrapolation, s.step, s.fmu_tolerance, s.tolerance, o.error,
+    # no number for these: the figure or the reason is in the status
+    error = "unstable" if o.unstable else "events differ" if o.events_differ else o.error
+    return [s.algorithm, s.extrapolation, s.step, s.fmu_tolerance, s.tolerance, error,
             o.wall_seconds, o.do_steps, o.rollbacks, o.communication_steps, o.status]
 
 
@@ -25,16 +27,38 @@ def write_table_csv(path: Path, outcomes: list[Outcome], metric: str) -> None:
             w.writerow([metric] + _row(o))
 
 
+TABLE_HEAD = (f"{'algorithm':<13} {'ex':>2} {'step [s]':>9} {'fmu tol':>7} {'tol':>7} "
+              f"{'error [1]':>10} {'wall [s]':>8} {'doSteps':>8} {'rollb.':>6}  status")
+
+
+def format_outcome(o: Outcome) -> str:
+    """One table row; an unstable run shows 'unstable', its figure or reason in the status."""
+    s = o.setting
+    status = o.status if len(o.status) < 60 else o.status[:57] + "..."
+    error = f"{'unstable':>10}" if o.unstable else f"{'events ≠':>10}" if o.events_differ \
+        else f"{o.error:>10.3e}"
+    return (f"{s.algorithm:<13} {s.extrapolation:>2} {s.step:>9.3g} "
+            f"{s.fmu_tolerance:>7.0e} {s.tolerance:>7.0e} {error} "
+            f"{o.wall_seconds:>8.3f} {o.do_steps:>8d} {o.rollbacks:>6d}  {status}")
+
+
 def format_table(outcomes: list[Outcome]) -> str:
-    head = (f"{'algorithm':<13} {'ex':>2} {'step [s]':>9} {'fmu tol':>7} {'tol':>7} "
-            f"{'error [1]':>10} {'wall [s]':>8} {'doSteps':>8} {'rollb.':>6}  status")
-    lines = [head, "-" * len(head)]
-    for o in outcomes:
+    lines = [TABLE_HEAD, "-" * len(TABLE_HEAD)] + [format_outcome(o) for o in outcomes]
+    return "\n".join(lines)
+
+
+def format_events(outcomes: list[Outcome]) -> str:
+    """Per run, the error of each [analysis].events figure (metric events only)."""
+    rows = [o for o in outcomes if o.extra.get("events")]
+    if not rows:
+        return ""
+    labels = list(rows[0].extra["events"])
+    lines = ["event figures, relative error per run:"]
+    for o in rows:
         s = o.setting
-        status = o.status if len(o.status) < 60 else o.status[:57] + "..."
-        lines.append(f"{s.algorithm:<13} {s.extrapolation:>2} {s.step:>9.3g} "
-                     f"{s.fmu_tolerance:>7.0e} {s.tolerance:>7.0e} {o.error:>10.3e} "
-                     f"{o.wall_seconds:>8.3f} {o.do_steps:>8d} {o.rollbacks:>6d}  {status}")
+        figures = ", ".join(f"{k} {v:.2e}" for k, v in o.extra["events"].items()
+                            if k in labels)
+        lines.append(f"  {s.algorithm} x{s.extrapolation} h {s.step:g}: {figures}")
     return "\n".join(lines)
 
 

@@ -4,6 +4,17 @@ each run compared with the monolithic reference (computed once, cached in the ou
 Fixed-step masters are swept over the communication step; a variable-step master (the one named
 `adaptive`, or any master class with `variable_step = True`) is swept over its tolerance instead,
 with the scene's step as its initial step.
+
+Each run's outcome is computed (and `report`ed, e.g. printed) as the run finishes, and kept as
+runs/<label>.outcome.json beside its CSV with a key of everything it depends on (physics,
+inputs, times, reference, metric, setting, crankfmu version): a sweep started again over the
+same folder takes the finished runs from there and runs only the rest.
+
+A run whose error exceeds UNSTABLE_ERROR (the coupling error as large as the quantity itself) or
+that stopped (the master or an FMU gave up: diverging states, a step limit) is reported as
+unstable, with the figure in the status, not as an error number to compare. A run that counts
+other events than the reference (a blow more or less by the stop time) has no per-event figure
+to compare either: its status says "events differ" and how many each had.
 """
 from __future__ import annotations
 
@@ -21,6 +32,8 @@ from ...reference import record_times, solve_reference, write_reference
 from .metrics import Metric, MetricError, ReferenceSamples, observed_order
 
 FLOOR_FACTOR = 10.0  # errors below 10 x the FMUs' tolerance are not coupling errors
+UNSTABLE_ERROR = 1.0  # relative error above which a run has lost the solution (unstable)
+EVENTS_DIFFER = "events differ"  # status of a run that counts other events than the reference
 
 
 @dataclass(frozen=True)
@@ -52,6 +65,30 @@ class Outcome:
     @property
     def ok(self) -> bool:
         return self.status == "completed" and math.isfinite(self.error)
+
+    @property
+    def unstable(self) -> bool:
+        return self.status.startswith("unstable")
+
+    @property
+    def events_differ(self) -> bool:
+        return self.status.startswith(EVENTS_DIFFER)
+
+    def to_json(self) -> dict:
+        s = self.setting
+        return {"setting": [s.algorithm, s.extrapolation, s.step, s.fmu_tolerance, s.tolerance],
+                "knob": self.knob, "error": self.error if math.isfinite(self.error) else None,
+                "wall_seconds": self.wall_seconds, "do_steps": self.do_steps,
+                "rollbacks": self.rollbacks, "communication_steps": self.communication_steps,
+                "status": self.status, "extra": self.extra}
+
+    @classmethod
+    def from_json(cls, data: dict) -> "Outcome":
+        error = data["error"]
+        return cls(Setting(*data["setting"]), data["knob"],
+                   math.inf if error is None else error, data["wall_seconds"],
+                   data["do_steps"], data["rollbacks"], data["communication_steps"],
+                   data["status"], data.get("extra", {}))
 
     @property
     def knob_value(self) -> float:
@@ -125,6 +162,36 @@ def _read_reference(csv: Path) -> ReferenceSamples:
     return ReferenceSamples(data[:, 0], {n: data[:, k] for k, n in enumerate(names) if k})
 
 
+def read_reference_file(csv: Path, needed: list[str], start: float,
+                        stop: float) -> ReferenceSamples:
+    """A reference from elsewhere (another tool, a finer run) in the run's CSV layout: first
+    column time [s], then one column per variable named "component.variable". Checked: it
+    reads as numbers, time increases, it covers [start, stop] and has the `needed` columns."""
+    from .metrics import MetricError
+    csv = Path(csv)
+    if not csv.is_file():
+        raise MetricError(f"--reference {csv}: no such file")
+    try:
+        ref = _read_reference(csv)
+    except (ValueError, IndexError) as err:
+        raise MetricError(f"--reference {csv}: not a CSV of numbers in the run layout (time, "
+                          f"then one column per \"component.variable\"): {err}") from None
+    missing = [n for n in needed if n not in ref.columns]
+    if missing:
+        raise MetricError(f"--reference {csv}: no column {', '.join(missing)} (the metric "
+                          f"needs them); columns: {', '.join(ref.columns) or 'none'}")
+    t = ref.times
+    if len(t) < 2 or not np.all(np.diff(t) > 0):
+        raise MetricError(f"--reference {csv}: the time column must increase strictly")
+    if t[0] > start + 1e-12 or t[-1] < stop - 1e-9 * max(1.0, abs(stop)):
+        raise MetricError(f"--reference {csv}: covers t = {t[0]:g} to {t[-1]:g} s; the runs "
+                          f"need {start:g} to {stop:g} s")
+    bad = [n for n in needed if not np.all(np.isfinite(ref.columns[n]))]
+    if bad:
+        raise MetricError(f"--reference {csv}: column {bad[0]} has values that are not finite")
+    return ref
+
+
 # -- runs ----------------------------------------------------------------------------------------
 def trial_scene(scene, setting: Setting):
     """`scene` with the master settings of `setting`."""
@@ -143,24 +210,75 @@ def run_one(scene, setting: Setting, metric: Metric, ref: ReferenceSamples, fmu_
 
 
 def run_settings(scene, settings: list[Setting], metric: Metric, ref: ReferenceSamples, fmu_dir,
-                 runs_dir: Path, executor=None, progress=False, label: str = "runs") \
-        -> list[Outcome]:
+                 runs_dir: Path, executor=None, progress=False, label: str = "runs",
+                 report=None, resume_key: str | None = None) -> list[Outcome]:
     """Every setting as one run on `executor` (default: a pool of one worker process, runs one
-    after another); this process writes the runs' CSVs and sidecars into runs_dir. The
-    outcomes do not depend on the executor (only wall times do)."""
+    after another); this process writes the runs' CSVs, sidecars and outcomes into runs_dir
+    and calls report(outcome) as each run finishes. With `resume_key`, settings whose outcome
+    file in runs_dir carries the same key are taken from there, not run again. The outcomes
+    do not depend on the executor (only wall times do)."""
     from ..executor import LocalPoolExecutor, RunTask
 
-    tasks = [RunTask(k, trial_scene(scene, s)) for k, s in enumerate(settings)]
+    outcomes: list[Outcome | None] = [None] * len(settings)
+    if resume_key is not None:
+        for k, s in enumerate(settings):
+            outcomes[k] = _kept_outcome(runs_dir, s, resume_key)
+            if outcomes[k] is not None and report is not None:
+                report(outcomes[k], kept=True)
+    todo = [k for k, o in enumerate(outcomes) if o is None]
+    tasks = {k: RunTask(k, trial_scene(scene, settings[k])) for k in todo}
+    if not tasks:
+        return outcomes
     own = executor is None
     executor = executor or LocalPoolExecutor(1)
+
+    def done(output) -> None:
+        k = output.key
+        paths = getattr(executor, "fmu_files", {})
+        outcomes[k] = _outcome(settings[k], output, tasks[k], metric, ref, runs_dir, paths)
+        if resume_key is not None:
+            _keep_outcome(runs_dir, outcomes[k], resume_key)
+        if report is not None:
+            report(outcomes[k], kept=False)
     try:
-        outputs = executor.run(tasks, fmu_dir, progress=progress, label=label)
+        executor.run(list(tasks.values()), fmu_dir, on_done=done, progress=progress,
+                     label=label)
     finally:
         if own:
             executor.close()
-    paths = getattr(executor, "fmu_files", {})
-    return [_outcome(s, o, t, metric, ref, runs_dir, paths)
-            for s, o, t in zip(settings, outputs, tasks)]
+    return outcomes
+
+
+def resume_key(reference_key: str, metric: Metric) -> str:
+    """What kept outcomes depend on besides their setting: the reference (its cache key, or an
+    external file's digest), the metric and the crankfmu version."""
+    payload = [reference_key, metric.describe(), versions().get("crankfmu")]
+    return hashlib.sha256(json.dumps(payload).encode()).hexdigest()
+
+
+def _outcome_file(runs_dir: Path, setting: Setting) -> Path:
+    return Path(runs_dir) / f"{setting.label}.outcome.json"
+
+
+def _kept_outcome(runs_dir: Path, setting: Setting, key: str) -> Outcome | None:
+    path = _outcome_file(runs_dir, setting)
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(data, dict) or data.get("key") != key + setting.label:
+        return None
+    return Outcome.from_json(data["outcome"])
+
+
+def _keep_outcome(runs_dir: Path, outcome: Outcome, key: str) -> None:
+    runs_dir = Path(runs_dir)
+    runs_dir.mkdir(parents=True, exist_ok=True)
+    path = _outcome_file(runs_dir, outcome.setting)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps({"key": key + outcome.setting.label,
+                               "outcome": outcome.to_json()}, indent=1, default=float) + "\n")
+    tmp.replace(path)  # atomic: an interrupted sweep never leaves half an outcome
 
 
 def _outcome(setting: Setting, output, task, metric: Metric, ref: ReferenceSamples,
@@ -173,23 +291,34 @@ def _outcome(setting: Setting, output, task, metric: Metric, ref: ReferenceSampl
     fmu_paths = {c: paths.get(d) for c, (d, _) in task.fmus.items()}
     if output.sidecar:  # the run got as far as writing results (completed or stopped early)
         write_run_files(output, csv, fmu_paths)
-    if output.status == "failed":
-        outcome.status = f"failed: {RunError(output.reason, csv)}"
+    if output.status == "failed":  # the run stopped early (diverged, not finite, step limit)
+        outcome.status = f"unstable (stopped): {RunError(output.reason, csv)}"
         return outcome
     if output.status == "refused":  # a master refusing the scene or setting
         outcome.status = f"unavailable: {output.reason}"
         return outcome
-    if output.status != "completed":
+    if output.status != "completed":  # a crash or a lost worker: not the coupling's doing
         outcome.status = f"{output.status}: {output.reason}"
         return outcome
     outcome.wall_seconds = output.wall_seconds
     outcome.do_steps, outcome.rollbacks = _counts(output.statistics)
     outcome.communication_steps = int(output.sidecar.get("communication_steps", output.steps))
+    t = output.rows[:, 0]
+    run = {n: output.column(n) for n in output.names}
     try:
-        outcome.error = metric.error(output.rows[:, 0],
-                                     {n: output.column(n) for n in output.names}, ref)
+        if metric.name == "events":
+            details = metric.event_details(t, run, ref)
+            outcome.extra["events"] = {d.spec.label: d.error for d in details}
+            reasons = list(dict.fromkeys(d.reason for d in details if d.reason))
+            if reasons:  # a missed or extra event: no figure to compare (not instability)
+                outcome.status = f"{EVENTS_DIFFER}: {'; '.join(reasons)}"
+                return outcome
+        outcome.error = metric.error(t, run, ref)
     except MetricError as err:
         outcome.status = f"no error figure: {err}"
+        return outcome
+    if not math.isfinite(outcome.error) or outcome.error > UNSTABLE_ERROR:
+        outcome.status = f"unstable: error {outcome.error:.3g} > {UNSTABLE_ERROR:g}"
     return outcome
 
 
