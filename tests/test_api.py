@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import SCENARIOS
+from tests.conftest import SCENARIOS
 
 SERVO = SCENARIOS / "servo_press.toml"
 

@@ -9,7 +9,7 @@ import re
 
 import pytest
 
-from conftest import SCENARIOS
+from tests.conftest import SCENARIOS
 
 
 def _commands(parser, path=()):

@@ -2,7 +2,7 @@
 
 Scene: the brief's drive (PlanetaryClutchDrive defaults) with a 5.5 kW, 1000 rpm induction motor
 (lambda_k = 2.2) whose rotor and flywheel are counted in J_a (motor J = 0). Command at t = 0 from
-the steady state. Three independent ways to the same numbers (tests/planetary_reference.py):
+the steady state. Three independent ways to the same numbers (tests/support/planetary_reference.py):
 
 * REF: a monolithic motor + drive ODE in Newton-Euler form (tooth force as unknown), event
   location with DOP853 at rtol = atol = 1e-12;
@@ -34,7 +34,7 @@ import math
 import numpy as np
 import pytest
 
-import planetary_reference as R
+from tests.support import planetary_reference as R
 from crankfmu.runtime.model import ParameterError, held
 from crankfmu.models.induction_motor.induction_motor import InductionMotor
 from crankfmu.models.planetary_drive.planetary_drive import PlanetaryClutchDrive, steady_state

@@ -460,7 +460,7 @@ def planetary_closed_form(d: dict, c0: float, c1: float, scene: str, w_a0: float
     (the held member at rest), with the linear motor law. Each phase (fixed lock/slide pattern)
     is linear time-invariant in z = (w_b, w_h, e_b, e_h, 1), e_k the brakes' exponentials:
     z(t) = expm(A t) z(t_i); break-free and lock are roots of linear functionals of z (brentq on
-    the exact expm). The same construction as tests/planetary_reference.py's `closed_form`,
+    the exact expm). The same construction as tests/support/planetary_reference.py's `closed_form`,
     extended by the speeds on a grid and the brake energies (trapezoidal rule on the grid,
     n intervals per phase: relative error ~1e-6). Units SI; d holds the drive's parameters."""
     from scipy.optimize import brentq
