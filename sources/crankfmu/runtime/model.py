@@ -16,6 +16,10 @@ Class attributes
     inputs       tuple of `Variable`; `start` is the value used when nothing is connected.
     outputs      tuple of `Variable`; `depends_on` lists the inputs with direct feedthrough.
 
+Derived for every subclass from those declarations (`PhysicsModel.__init_subclass__`):
+    IN, OUT      the position of each input and output by name, read as `u[self.IN.flange_w]`
+                 (a namedtuple of ints: one C-level attribute read, no index kept by hand).
+
 Methods
     check(p)                       raise `ParameterError` for impossible parameter values.
     state_names()                  names of the continuous states *for the enabled effects*:
@@ -52,7 +56,9 @@ in `integrator` (solver = "scipy": the cross-check; the FMU parameter `scipy_sol
 """
 from __future__ import annotations
 
+import keyword
 import math
+from collections import namedtuple
 from dataclasses import dataclass
 from types import SimpleNamespace
 from typing import Callable, Sequence
@@ -115,6 +121,25 @@ class Effect:
     default: bool = False
 
 
+def name_indices(owner: str, kind: str, names: Sequence[str]):
+    """The position of each name, as attributes of a namedtuple of ints (so a model reads
+    `u[self.IN.shaft_w]`, not `u[2]`: one C-level attribute read). Raises TypeError naming the
+    class and the name when it cannot be an attribute (not an identifier, a leading underscore,
+    a keyword) or is declared twice."""
+    names = list(names)
+    for name in names:
+        if not name.isidentifier() or keyword.iskeyword(name) or name.startswith("_") or \
+                names.count(name) > 1:
+            raise TypeError(f"{owner}: {kind} {name!r} must be a unique Python identifier "
+                            f"without a leading underscore")
+    return namedtuple(f"{owner}{kind.capitalize()}s", names)(*range(len(names)))
+
+
+def variable_indices(owner: str, kind: str, variables: Sequence[Variable]):
+    """`name_indices` of declared variables (`kind`: "input" or "output")."""
+    return name_indices(owner, kind, [v.name for v in variables])
+
+
 class PhysicsModel:
     """Base class; see the module docstring for the contract."""
 
@@ -135,6 +160,14 @@ class PhysicsModel:
     # state so far that integrating one step would take hours; failing fast lets the master
     # report where and when it happened.
     max_derivative_calls_per_step: int = 200_000
+    IN = variable_indices("PhysicsModel", "input", ())
+    OUT = variable_indices("PhysicsModel", "output", ())
+
+    def __init_subclass__(cls, **kwargs):
+        """Derive the name -> position tables IN and OUT from the class's declarations."""
+        super().__init_subclass__(**kwargs)
+        cls.IN = variable_indices(cls.__name__, "input", cls.inputs)
+        cls.OUT = variable_indices(cls.__name__, "output", cls.outputs)
 
     def __init__(self, parameters: dict | None = None, effects: Sequence[str] | dict | None = None):
         values = {v.name: float(v.start) for v in self.parameters}

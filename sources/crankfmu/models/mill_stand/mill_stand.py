@@ -231,9 +231,9 @@ class MillStandDrive(PhysicsModel):
         return J, p.m_stand * dx * ddx
 
     def crank_acceleration(self, phi, w, u):
-        J, half_dJ = self.reduced_inertia(phi, u[1])
+        J, half_dJ = self.reduced_inertia(phi, u[self.IN.flange_J])
         dx = self.kinematics(phi)[1]
-        M = (self.p.gear_ratio * u[0] + self.friction_torque(phi, w)
+        M = (self.p.gear_ratio * u[self.IN.flange_tau] + self.friction_torque(phi, w)
              + dx * self.load_force(phi, w) - half_dJ * w * w)
         return M / J
 
@@ -260,7 +260,7 @@ class MillStandDrive(PhysicsModel):
         """(phi, phi'): the states, or with driven_crank the driver's shaft over the gear."""
         if self.on("driven_crank"):
             i = self.p.gear_ratio
-            return self.p.phi_start + u[2] / i, u[3] / i
+            return self.p.phi_start + u[self.IN.shaft_phi] / i, u[self.IN.shaft_w] / i
         return x[0], x[1]
 
     # -- contract -------------------------------------------------------------------------
@@ -292,12 +292,12 @@ class MillStandDrive(PhysicsModel):
         xs, dx, _, _, _ = self.kinematics(phi)
         T2, T4, a = (0.0, 0.0, 0.0) if self.on("driven_crank") else self.rod_forces(phi, w, u)
         M_f = self.friction_torque(phi, w)
-        J, _ = self.reduced_inertia(phi, u[1])
+        J, _ = self.reduced_inertia(phi, u[self.IN.flange_J])
         E_f = x[names.index("E_friction")] if "E_friction" in names else 0.0
         E_l = x[names.index("E_load")] if "E_load" in names else 0.0
         v = self.variant
         q_rank = (Q_RANK_GUIDED if self.p.guides_hold_skew == 1.0 else Q_RANK_FREE_SKEW)[v]
         return np.array([i * w, i * phi, phi, w, xs, dx * w, a, T2, T4, self.preload(),
                          self.stand_skew(), M_f, -M_f * w, E_f, self.load_force(phi, w), E_l,
-                         J, W_SEED[v], Q_SEED[v], q_rank, *self.shaft_load(phi, w, u[1])],
-                        dtype=float)
+                         J, W_SEED[v], Q_SEED[v], q_rank,
+                         *self.shaft_load(phi, w, u[self.IN.flange_J])], dtype=float)

@@ -160,7 +160,7 @@ class CrankRockerHammer(RockerImpact):
         """(phi, phi'): the crank states, or with driven_crank the driver's shaft over the gear."""
         if self._driven:
             i = self.p.gear_ratio
-            return self.p.phi_start + u[2] / i, u[3] / i
+            return self.p.phi_start + u[self.IN.shaft_phi] / i, u[self.IN.shaft_w] / i
         return x[-4], x[-3]
 
     def rod(self, x, u):
@@ -226,7 +226,7 @@ class CrankRockerHammer(RockerImpact):
         return x
 
     def _crank_inertia(self, u) -> float:
-        return self.p.J_crank + self.p.gear_ratio ** 2 * u[1]
+        return self.p.J_crank + self.p.gear_ratio ** 2 * u[self.IN.flange_J]
 
     def shaft_load(self, x, u) -> tuple[float, float]:
         """(shaft_tau, shaft_J) at the input shaft: M_rod/i and J_cr/i^2."""
@@ -252,7 +252,7 @@ class CrankRockerHammer(RockerImpact):
         if self._driven:  # the driver integrates the crank; W_drive: the crank's work on the rod
             crank = [-M_crank * w, loss]
         else:
-            drive = p.gear_ratio * u[0]
+            drive = p.gear_ratio * u[self.IN.flange_tau]
             crank = [w, (drive + M_crank) / self._crank_inertia(u), drive * w, loss]
         return ([v0, ddu] if self.compliant else []) + rocker + crank
 

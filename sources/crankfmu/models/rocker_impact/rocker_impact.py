@@ -216,8 +216,10 @@ class RockerImpact(PhysicsModel):
         return self.contact_force(self.delta(x)) if self._d["contact"] else 0.0
 
     def _accelerations(self, x, u, P):
-        """(u0'', theta'', T) with the drive torque u[0] and inertia u[1] on the rocker shaft."""
-        return self._rocker_accelerations(x, P, u[0], self.p.J + u[1])
+        """(u0'', theta'', T) with the drive torque flange_tau and the inertia flange_J (inputs)
+        on the rocker shaft."""
+        IN = self.IN
+        return self._rocker_accelerations(x, P, u[IN.flange_tau], self.p.J + u[IN.flange_J])
 
     def _support_force(self, u0: float, v0: float) -> float:
         """T of the elastic support at displacement u0, speed v0."""
@@ -259,7 +261,7 @@ class RockerImpact(PhysicsModel):
         """Kinetic energy of rocker (+ drive inertia) + support and contact potential energy."""
         p = self.p
         u0, v, _, om, _, _, _, _ = self._split(x)
-        J_t = p.J + u[1]
+        J_t = p.J + u[self.IN.flange_J]
         E = 0.5 * p.m * v * v + p.m * p.r * v * om + 0.5 * J_t * om * om
         if self.compliant:
             E += self._spring_energy(u0)
@@ -307,7 +309,7 @@ class RockerImpact(PhysicsModel):
     def initial_state(self, u):
         p = self.p
         self._K_cache, self._Z_cache = self.K, self.Z   # parameters are fixed from here on
-        c, c0 = self.stiffnesses(float(u[1]))
+        c, c0 = self.stiffnesses(float(u[self.IN.flange_J]))
         if p.strike_at_start == 1.0:
             theta, omega = 0.0, p.V0 / p.S
         else:

@@ -210,7 +210,7 @@ class StephensonPress(PhysicsModel):
         """(phi, phi'): the states, or with driven_crank the driver's shaft over the gear."""
         if self.on("driven_crank"):
             i = self.p.gear_ratio
-            return self.p.phi_start + u[2] / i, u[3] / i
+            return self.p.phi_start + u[self.IN.shaft_phi] / i, u[self.IN.shaft_w] / i
         return x[0], x[1]
 
     def shaft_load(self, phi, w, J_input: float = 0.0) -> tuple[float, float]:
@@ -223,8 +223,8 @@ class StephensonPress(PhysicsModel):
         if self._driven:
             return ()
         phi, w = x
-        J, half_dJ, M_C = self.crank_terms(phi, u[1])[:3]
-        return (w, (self.p.gear_ratio * u[0] + M_C - half_dJ * w * w) / J)
+        J, half_dJ, M_C = self.crank_terms(phi, u[self.IN.flange_J])[:3]
+        return (w, (self.p.gear_ratio * u[self.IN.flange_tau] + M_C - half_dJ * w * w) / J)
 
     def event_functions(self, u_of_t):
         """The forging window's edges (phi = start and start + forging_angle, mod 2 pi), where
@@ -250,7 +250,7 @@ class StephensonPress(PhysicsModel):
     def output_values(self, t, x, u):
         phi, w = self.crank_motion(x, u)
         i = self.p.gear_ratio
-        J, half_dJ, M_C, F5, S, dS = self.crank_terms(phi, u[1])[:6]
+        J, half_dJ, M_C, F5, S, dS = self.crank_terms(phi, u[self.IN.flange_J])[:6]
         return [i * w, i * phi, phi, w, S, dS * w, F5, J, M_C, (M_C - half_dJ * w * w) / i,
                 J / (i * i)]
 
