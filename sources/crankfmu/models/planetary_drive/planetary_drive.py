@@ -57,24 +57,105 @@ torque): see sources/crankfmu/models/planetary_drive/README.md.
 """
 from __future__ import annotations
 
-import copy
+import enum
 import itertools
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
-from ...runtime.model import Effect, ParameterError, PhysicsModel, Variable
+from ...runtime.model import Effect, ParameterError, PhysicsModel, Variable, name_indices
 
 MEMBERS = ("b", "h")      # braked members
 ELEMENTS = ("a", "b", "h")  # friction elements: sun resistance, ring and carrier brakes
-# state layout
-I_PHI = {"b": 0, "h": 1}
-I_W = {"b": 2, "h": 3}
-I_EB, I_EH, I_ER, I_WS, I_WF = 4, 5, 6, 7, 8
-# input layout
-U_CMD, U_TAU, U_JA, U_FTAU, U_FJ = 0, 1, 2, 3, 4
+STATE_NAMES = ("phi_b", "phi_h", "w_b", "w_h", "E_brake_b", "E_brake_h", "E_resist", "W_sun",
+               "W_flange")
+X = name_indices("PlanetaryClutchDrive", "state", STATE_NAMES)  # x[X.w_b]: state by name
 
 NEVER = -1.0  # event-time outputs before the first such event
+
+
+class Direction(enum.IntEnum):
+    """How a friction element moves: the sign of its speed while sliding, 0 while locked (an
+    int, so friction torques and slip powers are -C d and d w as in the equations)."""
+
+    BACKWARD = -1
+    LOCKED = 0
+    FORWARD = 1
+
+
+@dataclass
+class ElementState:
+    """Mode of one friction element (sun a, ring b, carrier h) and its lock history."""
+
+    direction: Direction
+    t_lock: float = NEVER  # s, when it last locked
+    t_slip: float = NEVER  # s, when it last broke free
+    n_lock: int = 0
+    n_slip: int = 0
+
+
+@dataclass
+class BrakeState:
+    """A brake's law since the last command edge: engaging or releasing from M0 at t0."""
+
+    engaging: bool
+    t0: float = 0.0  # s, start of the law (the command edge)
+    M0: float = 0.0  # N.m, torque at t0
+
+
+@dataclass
+class Modes:
+    """The discrete state: everything but the continuous states that the motion depends on.
+    `to_json`/`from_json` give the JSON-safe form the FMU saves (floats exact, -inf as None)."""
+
+    command: int
+    brakes: dict[str, BrakeState]
+    elements: dict[str, ElementState]
+    t_command: float = NEVER  # s, time of the last command edge
+    t_last: float = -math.inf  # s, time of the last discrete update (power-law breakpoints)
+    n_pass: int = 0  # passes of a member through zero speed without locking
+    n_events: int = 0
+
+    def to_json(self) -> dict:
+        return {"command": self.command, "t_command": self.t_command,
+                "t_last": None if self.t_last == -math.inf else self.t_last,
+                "n_pass": self.n_pass, "n_events": self.n_events,
+                "brakes": {k: {"engaging": b.engaging, "t0": b.t0, "M0": b.M0}
+                           for k, b in self.brakes.items()},
+                "elements": {k: {"direction": int(e.direction), "t_lock": e.t_lock,
+                                 "t_slip": e.t_slip, "n_lock": e.n_lock, "n_slip": e.n_slip}
+                             for k, e in self.elements.items()}}
+
+    @classmethod
+    def from_json(cls, d: dict) -> "Modes":
+        return cls(command=int(d["command"]), t_command=float(d["t_command"]),
+                   t_last=-math.inf if d["t_last"] is None else float(d["t_last"]),
+                   n_pass=int(d["n_pass"]), n_events=int(d["n_events"]),
+                   brakes={k: BrakeState(bool(b["engaging"]), float(b["t0"]), float(b["M0"]))
+                           for k, b in d["brakes"].items()},
+                   elements={k: ElementState(Direction(e["direction"]), float(e["t_lock"]),
+                                             float(e["t_slip"]), int(e["n_lock"]),
+                                             int(e["n_slip"]))
+                             for k, e in d["elements"].items()})
+
+
+class EventKind(enum.Enum):
+    BREAK_REST = "break_rest"  # all at rest: the feasible interval of F_a closes
+    SLIP = "slip"              # the single locked element breaks free in `direction`
+    ZERO = "zero"              # a sliding element reaches zero speed
+    COMMAND = "command"        # the command input crosses 0.5
+    TIME = "time"              # a kink of a power-law brake torque (at `time`)
+
+
+@dataclass(frozen=True)
+class Event:
+    """What an event function's zero means (on_event reads it by the function's index)."""
+
+    kind: EventKind
+    element: str | None = None
+    direction: Direction = Direction.LOCKED
+    time: float | None = None  # s, TIME events only
 
 
 class PlanetaryClutchDrive(PhysicsModel):
@@ -199,40 +280,28 @@ class PlanetaryClutchDrive(PhysicsModel):
         return self.p.r_b / self.p.r_a
 
     # -- discrete state --------------------------------------------------------------------
-    def _fresh_discrete(self) -> dict:
+    def _fresh_modes(self) -> Modes:
+        """Brakes fully on (held member) or off at t = 0 (initial_state sets the directions)."""
         p = self.p
         stroke = p.initial_period == 3.0
-        d = {
-            "command": 1 if stroke else 0,
-            "t_command": NEVER,
-            # brake: [engaging (1) or releasing (0), t0 of the law, M0 at t0]
-            "brake_b": [1, 0.0, p.Mp_b] if stroke else [0, 0.0, 0.0],
-            "brake_h": [0, 0.0, 0.0] if stroke else [1, 0.0, p.Mp_h],
-            "dir_a": 1, "dir_b": 0, "dir_h": 0,  # +1/-1 sliding, 0 locked
-            "t_last": -math.inf,  # time of the last discrete update (power-law breakpoints)
-            "t_lock_a": NEVER, "t_slip_a": NEVER, "t_lock_b": NEVER, "t_slip_b": NEVER,
-            "t_lock_h": NEVER, "t_slip_h": NEVER,
-            "n_lock_a": 0, "n_lock_b": 0, "n_lock_h": 0, "n_slip_a": 0, "n_slip_b": 0,
-            "n_slip_h": 0, "n_pass": 0,
-            "n_events": 0,
-        }
-        return d
+        return Modes(
+            command=1 if stroke else 0,
+            brakes={"b": BrakeState(True, 0.0, p.Mp_b) if stroke else BrakeState(False),
+                    "h": BrakeState(False) if stroke else BrakeState(True, 0.0, p.Mp_h)},
+            elements={"a": ElementState(Direction.FORWARD),
+                      "b": ElementState(Direction.LOCKED), "h": ElementState(Direction.LOCKED)})
 
     def discrete_state(self) -> dict:
-        d = copy.deepcopy(self.d)
-        d["t_last"] = None if d["t_last"] == -math.inf else d["t_last"]
-        return d
+        return self.modes.to_json()
 
     def set_discrete_state(self, state: dict) -> None:
-        d = copy.deepcopy(state)
-        d["t_last"] = -math.inf if d["t_last"] is None else float(d["t_last"])
-        self.d = d
+        self.modes = Modes.from_json(state)
 
     def __init__(self, parameters=None, effects=None):
         super().__init__(parameters, effects)
         self._derive()
-        self.d = self._fresh_discrete()
-        self._event_kinds: list[tuple] = []
+        self.modes = self._fresh_modes()
+        self._events: list[Event] = []
 
     def _derive(self) -> None:
         """Constants derived from the parameters (again in initial_state, so a host that sets
@@ -255,7 +324,8 @@ class PlanetaryClutchDrive(PhysicsModel):
 
     def brake_torque(self, k: str, t: float) -> float:
         """Torque capacity M_tk(t) of brake k from its law and the last command edge."""
-        engaging, t0, M0 = self.d["brake_" + k]
+        brake = self.modes.brakes[k]
+        engaging, t0, M0 = brake.engaging, brake.t0, brake.M0
         Mp, alpha, beta, tc, tr, z = self._law(k)
         tau = max(t - t0, 0.0)
         if engaging:
@@ -276,19 +346,20 @@ class PlanetaryClutchDrive(PhysicsModel):
             return []
         out = []
         for k in MEMBERS:
-            engaging, t0, M0 = self.d["brake_" + k]
+            brake = self.modes.brakes[k]
+            engaging, t0, M0 = brake.engaging, brake.t0, brake.M0
             Mp, _, _, tc, tr, _ = self._law(k)
             if (engaging and M0 != Mp) or (not engaging and M0 != 0.0):
                 tb = t0 + (tc if engaging else tr)
-                if tb > self.d["t_last"]:
+                if tb > self.modes.t_last:
                     out.append(tb)
         return out
 
     # -- mechanics -------------------------------------------------------------------------
     def mass_matrix(self, u) -> np.ndarray:
         p, pr = self.p, self.ratio
-        Ja = p.J_a + u[U_JA]
-        Jh = p.J_h + u[U_FJ]
+        Ja = p.J_a + u[self.IN.sun_J]
+        Jh = p.J_h + u[self.IN.flange_J]
         return np.array([[Ja * pr * pr + p.J_b, -Ja * pr * (1 + pr)],
                          [-Ja * pr * (1 + pr), Ja * (1 + pr) ** 2 + Jh]])
 
@@ -299,13 +370,14 @@ class PlanetaryClutchDrive(PhysicsModel):
     def _loads(self, t, u):
         """(M, Q, C): mass matrix, generalised port torques, friction capacities."""
         p = self.p
-        Q = u[U_TAU] * self._G["a"] + np.array([0.0, u[U_FTAU]])
+        Q = u[self.IN.sun_tau] * self._G["a"] + np.array([0.0, u[self.IN.flange_tau]])
         C = {"a": p.M_ca, "b": self.brake_torque("b", t) + p.M_cb,
              "h": self.brake_torque("h", t) + p.M_ch}
         return self.mass_matrix(u), Q, C
 
-    def _dirs(self) -> dict:
-        return {k: self.d["dir_" + k] for k in ELEMENTS}
+    def _dirs(self) -> dict[str, Direction]:
+        elements = self.modes.elements
+        return {k: elements[k].direction for k in ELEMENTS}
 
     def _solve(self, t, u, dirs=None):
         """Accelerations (dw_b, dw_h), friction torques F_k and capacities C_k in the modes
@@ -357,7 +429,7 @@ class PlanetaryClutchDrive(PhysicsModel):
         each candidate and keep the least. `shrink` < 1 scales the stuck capacities (used at a
         break-free event to decide on the side of breaking free)."""
         for k, direction in (forced or {}).items():
-            self.d["dir_" + k] = direction
+            self.modes.elements[k].direction = direction
         dirs = self._dirs()
         zero = [k for k in ELEMENTS if k in zero and k not in (forced or {})]
         M, Q, C = self._loads(t, u)
@@ -386,47 +458,55 @@ class PlanetaryClutchDrive(PhysicsModel):
         if len(stuck) == 2:  # two stuck hold the third (cannot happen for the minimiser)
             stuck = set(ELEMENTS)
         for k in zero:
-            self.d["dir_" + k] = 0 if k in stuck else (1 if G[k] @ a > 0.0 else -1)
+            self.modes.elements[k].direction = Direction.LOCKED if k in stuck else \
+                (Direction.FORWARD if G[k] @ a > 0.0 else Direction.BACKWARD)
 
-    def _lock_set(self):
-        return [k for k in ELEMENTS if not self.d["dir_" + k]]
+    def _lock_set(self) -> list[str]:
+        elements = self.modes.elements
+        return [k for k in ELEMENTS if elements[k].direction is Direction.LOCKED]
 
     def _record(self, t, before: dict) -> None:
         """Count locks and break-frees between the modes `before` and now."""
         for k in ELEMENTS:
-            old, new = before[k], self.d["dir_" + k]
+            element = self.modes.elements[k]
+            old, new = before[k], element.direction
             if old and not new:
-                self.d["n_lock_" + k] += 1
-                self.d["t_lock_" + k] = float(t)
+                element.n_lock += 1
+                element.t_lock = float(t)
             elif not old and new:
-                self.d["n_slip_" + k] += 1
-                self.d["t_slip_" + k] = float(t)
+                element.n_slip += 1
+                element.t_slip = float(t)
 
     def _zero_speeds(self, x) -> np.ndarray:
         """Put the locked members' speeds exactly at zero (all locked: everything at rest)."""
         locked = self._lock_set()
         if len(locked) >= 2:
-            x[I_W["b"]] = x[I_W["h"]] = 0.0
-        elif locked == ["b"] or locked == ["h"]:
-            x[I_W[locked[0]]] = 0.0
+            x[X.w_b] = x[X.w_h] = 0.0
+        elif locked == ["b"]:
+            x[X.w_b] = 0.0
+        elif locked == ["h"]:
+            x[X.w_h] = 0.0
         elif locked == ["a"]:  # w_a = -p w_b + (1+p) w_h = 0
             pr = self.ratio
-            x[I_W["b"]] = (1 + pr) * x[I_W["h"]] / pr
+            x[X.w_b] = (1 + pr) * x[X.w_h] / pr
         return x
 
     def period(self) -> int:
-        if self.d["command"]:
-            return 3 if self.d["dir_b"] == 0 else 2
-        return 1 if self.d["dir_h"] == 0 else 4
+        """1 idle, 2 engagement, 3 working stroke, 4 stopping."""
+        elements = self.modes.elements
+        if self.modes.command:
+            return 3 if elements["b"].direction is Direction.LOCKED else 2
+        return 1 if elements["h"].direction is Direction.LOCKED else 4
 
     def _apply_command(self, t, value: int) -> None:
+        modes = self.modes
         for k in MEMBERS:
             M_now = self.brake_torque(k, t)
             engage = (k == "b") == bool(value)
-            self.d["brake_" + k] = [1 if engage else 0, float(t), M_now]
-        self.d["command"] = int(value)
-        self.d["t_command"] = float(t)
-        self.d["n_events"] += 1
+            modes.brakes[k] = BrakeState(engage, float(t), M_now)
+        modes.command = int(value)
+        modes.t_command = float(t)
+        modes.n_events += 1
 
     def _holds(self, t, u) -> bool:
         """Do the present locks hold (friction torques within capacity)?"""
@@ -441,35 +521,34 @@ class PlanetaryClutchDrive(PhysicsModel):
         edge starts engagement/stopping, and locks that no longer hold break free. Hosts that
         integrate the model themselves (monolithic references) call this after every input
         discontinuity."""
-        value = 1 if u[U_CMD] >= 0.5 else 0
-        if value != self.d["command"]:
+        value = 1 if u[self.IN.command] >= 0.5 else 0
+        if value != self.modes.command:
             self._apply_command(t, value)
         if not self._holds(t, u):
             before = self._dirs()
             self._choose_modes(t, u, self._lock_set(), shrink=1.0 - 1e-9)
             self._record(t, before)
-            self.d["n_events"] += 1
+            self.modes.n_events += 1
         return x
 
     # -- contract --------------------------------------------------------------------------
     def state_names(self):
-        return ("phi_b", "phi_h", "w_b", "w_h", "E_brake_b", "E_brake_h", "E_resist", "W_sun",
-                "W_flange")
+        return STATE_NAMES
 
     def initial_state(self, u):
         p, pr = self.p, self.ratio
         u = np.asarray(u, dtype=float)
         self._derive()
-        self.d = self._fresh_discrete()
-        x = np.zeros(9)
-        x[I_PHI["b"]], x[I_PHI["h"]] = p.phi_b_start, p.phi_h_start
+        self.modes = self._fresh_modes()
+        x = np.zeros(len(STATE_NAMES))
+        x[X.phi_b], x[X.phi_h] = p.phi_b_start, p.phi_h_start
         if p.initial_period == 1.0:  # carrier held, ring turns backwards
-            x[I_W["b"]] = -p.w_a_start / pr
+            x[X.w_b] = -p.w_a_start / pr
         else:  # ring held, carrier forwards
-            x[I_W["h"]] = p.w_a_start / (1 + pr)
-        w = {"a": p.w_a_start, "b": x[I_W["b"]], "h": x[I_W["h"]]}
+            x[X.w_h] = p.w_a_start / (1 + pr)
+        w = {"a": p.w_a_start, "b": x[X.w_b], "h": x[X.w_h]}
         for k in ELEMENTS:
-            self.d["dir_" + k] = int(np.sign(w[k]))
+            self.modes.elements[k].direction = Direction(int(np.sign(w[k])))
         zero = [k for k in ELEMENTS if w[k] == 0.0]
         self._choose_modes(0.0, u, zero)
         return self._zero_speeds(x)
@@ -483,62 +562,65 @@ class PlanetaryClutchDrive(PhysicsModel):
         return np.array([10.0, 10.0, w / self.ratio, w / (1 + self.ratio), E, E, E, E, E])
 
     def sun_speed(self, x) -> float:
-        if self.d["dir_a"] == 0:
+        if self.modes.elements["a"].direction is Direction.LOCKED:
             return 0.0
         pr = self.ratio
-        return -pr * x[I_W["b"]] + (1 + pr) * x[I_W["h"]]
+        return -pr * x[X.w_b] + (1 + pr) * x[X.w_h]
 
     def derivatives(self, t, x, u):
         p = self.p
         a, _, C, _ = self._solve(t, u)
-        w_b, w_h = x[I_W["b"]], x[I_W["h"]]
-        d = self.d
+        w_b, w_h = x[X.w_b], x[X.w_h]
+        e = self.modes.elements
         w_a = self.sun_speed(x)
-        slip_a, slip_b, slip_h = d["dir_a"] * w_a, d["dir_b"] * w_b, d["dir_h"] * w_h
-        return np.array([
+        slip_a, slip_b, slip_h = (e["a"].direction * w_a, e["b"].direction * w_b,
+                                  e["h"].direction * w_h)
+        return np.array([  # in the order of STATE_NAMES
             w_b, w_h, a[0], a[1],
             (C["b"] - p.M_cb) * slip_b,
             (C["h"] - p.M_ch) * slip_h,
             p.M_ca * slip_a + p.M_cb * slip_b + p.M_ch * slip_h,
-            u[U_TAU] * w_a,
-            u[U_FTAU] * w_h,
+            u[self.IN.sun_tau] * w_a,
+            u[self.IN.flange_tau] * w_h,
         ])
 
     def kinetic_energy(self, x, u) -> float:
-        w = np.array([x[I_W["b"]], x[I_W["h"]]])
+        w = np.array([x[X.w_b], x[X.w_h]])
         return 0.5 * float(w @ self.mass_matrix(u) @ w)
 
     def output_values(self, t, x, u):
         pr = self.ratio
         _, F, _, _ = self._solve(t, u)
         w_a = self.sun_speed(x)
-        phi_a = -pr * x[I_PHI["b"]] + (1 + pr) * x[I_PHI["h"]]
-        d = self.d
-        return np.array([
-            w_a, phi_a, x[I_W["h"]], x[I_PHI["h"]],
-            w_a, x[I_W["b"]], x[I_W["h"]],
+        phi_a = -pr * x[X.phi_b] + (1 + pr) * x[X.phi_h]
+        m = self.modes
+        b, h = m.elements["b"], m.elements["h"]
+        return np.array([  # in the order of `outputs`
+            w_a, phi_a, x[X.w_h], x[X.phi_h],
+            w_a, x[X.w_b], x[X.w_h],
             self.brake_torque("b", t), self.brake_torque("h", t), F["b"], F["h"], F["a"],
-            x[I_EB], x[I_EH], x[I_ER], x[I_WS], x[I_WF], self.kinetic_energy(x, u),
-            float(self.period()), d["t_command"], d["t_lock_b"], d["t_slip_b"],
-            d["t_lock_h"], d["t_slip_h"], float(d["n_lock_b"]), float(d["n_lock_h"]),
-            float(d["n_events"]),
+            x[X.E_brake_b], x[X.E_brake_h], x[X.E_resist], x[X.W_sun], x[X.W_flange],
+            self.kinetic_energy(x, u),
+            float(self.period()), m.t_command, b.t_lock, b.t_slip, h.t_lock, h.t_slip,
+            float(b.n_lock), float(h.n_lock), float(m.n_events),
         ], dtype=float)
 
     # -- events ----------------------------------------------------------------------------
     def event_functions(self, u_of_t):
-        kinds, funcs = [], []
+        events, funcs = [], []
         G, _ = self._geometry()
 
-        def add(kind, g, direction):
+        def add(event, g, direction):
             g.terminal, g.direction = True, direction
-            kinds.append(kind)
+            events.append(event)
             funcs.append(g)
 
         locked = self._lock_set()
         if len(locked) == 3:  # all at rest: the feasible interval of F_a closes
-            add(("break_rest",), lambda t, x: self._solve(t, u_of_t(t))[3], -1)
+            add(Event(EventKind.BREAK_REST), lambda t, x: self._solve(t, u_of_t(t))[3], -1)
         for k in ELEMENTS:
-            if self.d["dir_" + k] == 0:
+            direction = self.modes.elements[k].direction
+            if direction is Direction.LOCKED:
                 if len(locked) == 1:
                     def g_fwd(t, x, k=k):  # F_k -> -C_k: breaks free forwards
                         _, F, C, _ = self._solve(t, u_of_t(t))
@@ -548,47 +630,47 @@ class PlanetaryClutchDrive(PhysicsModel):
                         _, F, C, _ = self._solve(t, u_of_t(t))
                         return C[k] - F[k]
 
-                    add(("slip", k, +1), g_fwd, -1)
-                    add(("slip", k, -1), g_bwd, -1)
-            else:
-                add(("zero", k), lambda t, x, gk=G[k]: float(gk @ x[2:4]),
-                    -self.d["dir_" + k])
-        sign = 1.0 if self.d["command"] == 0 else -1.0
-        add(("command",), lambda t, x: sign * (u_of_t(t)[U_CMD] - 0.5), 1)
+                    add(Event(EventKind.SLIP, k, Direction.FORWARD), g_fwd, -1)
+                    add(Event(EventKind.SLIP, k, Direction.BACKWARD), g_bwd, -1)
+            else:  # w_k = G_k . (w_b, w_h) falls to zero
+                add(Event(EventKind.ZERO, k),
+                    lambda t, x, gk=G[k]: float(gk @ x[X.w_b:X.w_h + 1]), -int(direction))
+        sign = 1.0 if self.modes.command == 0 else -1.0
+        i_cmd = self.IN.command
+        add(Event(EventKind.COMMAND), lambda t, x: sign * (u_of_t(t)[i_cmd] - 0.5), 1)
         for tb in self._breakpoints():
-            add(("time", tb), lambda t, x, tb=tb: t - tb, 1)
-        self._event_kinds = kinds
+            add(Event(EventKind.TIME, time=tb), lambda t, x, tb=tb: t - tb, 1)
+        self._events = events
         return funcs
 
     def on_event(self, t, x, u, index):
-        kind = self._event_kinds[index]
+        event = self._events[index]
         x = np.array(x, dtype=float)
-        d = self.d
-        d["t_last"] = float(t)
-        if kind[0] == "time":
+        modes, elements = self.modes, self.modes.elements
+        modes.t_last = float(t)
+        if event.kind is EventKind.TIME:
             return x
-        d["n_events"] += 1
+        modes.n_events += 1
         before = self._dirs()
-        if kind[0] == "slip":  # the single locked member breaks free in the event's direction
-            k = kind[1]
-            self._choose_modes(t, u, [], forced={k: kind[2]})
-        elif kind[0] == "break_rest":
+        if event.kind is EventKind.SLIP:  # the single locked member breaks free
+            self._choose_modes(t, u, [], forced={event.element: event.direction})
+        elif event.kind is EventKind.BREAK_REST:
             self._choose_modes(t, u, list(ELEMENTS), shrink=1.0 - 1e-9)
-        elif kind[0] == "zero":  # member reaches zero speed: lock it if the torques allow
-            k = kind[1]
-            d["dir_" + k] = 0
+        elif event.kind is EventKind.ZERO:  # member reaches zero speed: lock it if it can
+            k = event.element
+            elements[k].direction = Direction.LOCKED
             zero = self._lock_set()
             if len(zero) >= 2:
                 zero = list(ELEMENTS)
             for j in zero:
-                d["dir_" + j] = 0
+                elements[j].direction = Direction.LOCKED
             x = self._zero_speeds(x)
             self._choose_modes(t, u, zero)
-            if d["dir_" + k] and k in MEMBERS:  # passed through zero without locking
-                d["n_pass"] += 1
-        elif kind[0] == "command":
-            d["n_events"] -= 1  # _apply_command counts it
-            self._apply_command(t, 0 if d["command"] else 1)
+            if elements[k].direction and k in MEMBERS:  # passed through zero without locking
+                modes.n_pass += 1
+        elif event.kind is EventKind.COMMAND:
+            modes.n_events -= 1  # _apply_command counts it
+            self._apply_command(t, 0 if modes.command else 1)
             if not self._holds(t, u):
                 self._choose_modes(t, u, self._lock_set(), shrink=1.0 - 1e-9)
         self._record(t, before)
