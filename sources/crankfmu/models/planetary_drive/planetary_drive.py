@@ -1,59 +1,7 @@
-"""Planetary drive of a crank press with friction brakes on the ring and the carrier
-(seed planetary_drive_friction_clutch; MODELS.md section 3; sources/crankfmu/models/planetary_drive/README.md).
-
-Type-A planetary gear: sun a (driven by the motor through the `sun_*` port), internal ring b,
-carrier h (drives the press through the `flange_*` port). p = r_b/r_a = -i_ab^h, Willis:
-
-    w_a = -p w_b + (1+p) w_h
-
-Generalised coordinates v = (w_b, w_h); T = 1/2 (J_a w_a^2 + J_b w_b^2 + J_h w_h^2) with
-J_a := J_a + sun_J and J_h := J_h + flange_J; Lagrange (planets lumped into the carrier):
-
-    [J_a p^2 + J_b      -J_a p (1+p)     ] [w_b']   [ -p M_A + F_b            ]
-    [-J_a p (1+p)        J_a (1+p)^2 + J_h] [w_h'] = [ (1+p) M_A + tau_fl + F_h ]
-
-    M_A = sun_tau + F_a           (F_a = -M_ca while the sun turns forwards: MODELS.md's
-                                   M_A = M_motor - M_ca)
-    tau_fl = flange_tau           (external torque on the carrier from a coupled press)
-    F_k  = friction torque on element k, |F_k| <= C_k
-
-Three friction elements k, each with its speed w_k = G_k . v:
-    a  sun resistance           C_a = M_ca                 G_a = (-p, 1+p)
-    b  ring brake + resistance  C_b = M_tb(t) + M_cb       G_b = (1, 0)
-    h  carrier brake + resist.  C_h = M_th(t) + M_ch       G_h = (0, 1)
-  sliding (direction d = sgn w_k): F_k = -C_k d.
-  locked  (d = 0): a constraint on the ACCELERATION G_k . v' = 0 (w_k stays exactly 0.0 for
-          b and h; the sun's speed is reported as exactly 0.0); F_k is the constraint torque.
-  Possible lock sets: none, one element (1 DOF left), or all three (at rest: two locked
-  elements hold the third by Willis; the three friction torques are then statically
-  indeterminate, and the rest holds while an F_a exists with every |F_k| <= C_k).
-Mode changes (events, located by the integrator):
-  sliding -> w_k reaches 0: w_k := 0 exactly; lock if the torques allow, else it passes
-          through zero and slides the other way.
-  one locked -> F_k reaches -C_k (breaks free forwards) or +C_k (backwards).
-  all locked -> the feasible interval of F_a closes.
-  At every such event the new modes are the unique Coulomb solution: the acceleration
-  minimises the convex f(a) = 1/2 a.M.a - Q.a + sum_{k at rest} C_k |G_k.a| (Gauss's
-  principle with maximal dissipation), found by comparing f at its few candidate points.
-This is the Modelica.Mechanics.Rotational PartialFriction logic (locked = acceleration
-constraint, constant sliding friction) for three coupled elements, without its
-StartForward/StartBackward modes: a member that breaks free starts sliding at w = 0 with an
-acceleration of the breakaway sign. No chattering: a lock costs one event, a break-free one.
-
-Brake torque laws, t since the last command edge (t0), M0 the torque at the edge:
-  exponential (default)   engage  M = M_p - (M_p - M0) exp(-alpha t)   (= M_p (1 - e^-at), M0=0)
-                          release M = M0 exp(-beta t)                  (= M_p e^-bt, M0=M_p)
-  effect power_law        engage  M = M0 + (M_p - M0) min(t/t_c, 1)^z   (= B t^z, B = M_p/t_c^z)
-                          release M = M0 (1 - min(t/t_r, 1))^z          (the engagement retraced)
-Command (input `command`, >= 0.5 means 1): an edge 0 -> 1 engages brake b and releases brake h
-(engagement, period 2, then working stroke, period 3, once b locks); an edge 1 -> 0 releases b and
-engages h (stopping, period 4, then idle, period 1, once h locks). An edge is an event (at a
-communication point, or inside a step if the input changes continuously).
-
-Press coupling: the carrier port (flange_tau/flange_J in, flange_w/flange_phi out) lets a press be
-coupled later. Coupling a press that has its own dynamics rigidly to the carrier is the classic
-hard case of co-simulation (two inertias on one rigid shaft, algebraic loop through the
-torque): see sources/crankfmu/models/planetary_drive/README.md.
+"""Planetary drive of a crank press with friction brakes on the ring and the carrier (seed
+planetary_drive_friction_clutch, eq. (1)-(10); MODELS.md section 3): three coupled Coulomb
+elements that lock and break free, brake laws, the four periods, a carrier port for a press.
+Equations, modes, events, variables and tests: the model card README.md in this folder.
 """
 from __future__ import annotations
 

@@ -1,40 +1,7 @@
-"""Rocker impact unit (seed rocker_impact_unit, eq. 1-2; MODELS.md section 4).
-
-A rigid rocker (inertia J about the pivot, mass m, centre of mass at r, strike point at S from
-the pivot) strikes the end of a semi-infinite elastic rod (the tool). The pivot rests on an
-elastic support that moves along the tool axis. Coordinates: u0 the pivot displacement (toward
-the tool), theta the rocker angle from the strike position (the strike point moves by
-u0 + S theta), w the tool end. Lagrange (sources/crankfmu/models/rocker_impact/README.md):
-
-    m u0'' + m r theta''       = -P - T                  T = c0 u0       (support)
-    m r u0'' + J_t theta''     = -P S + tau_drive        J_t = J + flange_J
-    w' = P/Z,  Z = E F/a                                  (rod end, radiation impedance)
-    delta = u0 + S theta - w - gap,  P = c delta  or  K delta^1.5 (effect hertz_contact)
-
-Contact is unilateral: it begins when delta rises through 0 and ends when it falls back to 0
-(P returns to zero); both are located as events inside a communication step. While in contact,
-the largest P (an event on delta' = 0, which is P' = 0) and the largest |T| (events on
-u0' = 0, which is T' = 0, and the value at the end of contact) are located too, so the
-last-impact statistics do not depend on the communication step.
-
-Effect support_compliance off: the pivot is pinned (c0 -> infinity), u0 = 0, the strike-point
-mass is J_t/S^2 and T = -P - m r theta'' is the pivot reaction (it feeds through the drive
-torque and inertia).
-
-Linearised stiffnesses (effect hertz_contact off): c = 1.25 K^(2/3) Pm^(1/3) and
-c0 = k_n Tm^(1/3) from the paper's fixed-point iterations on the first-approximation peaks
-(rocker_linear.linearise, to 0.1 %), at initialization with J_t and the impact speed V0, unless
-c_contact / c_support give them. With hertz_contact on, c0 still comes from that iteration.
-
-Hertzian bearing (effect hertz_support, with support_compliance; seed 004): the support is the
-nonlinear law the paper linearises, T = kappa |u0|^1.5 sgn(u0), kappa = (k_n/1.25)^1.5, with the
-potential energy 0.4 kappa |u0|^2.5. (The linearisation c0 = k_n Tm^(1/3) is 1.25 x its secant
-stiffness T/u0 = kappa^(2/3) T^(1/3) at T = Tm: the same 1.25 as the contact's c.) The contact's
-linearised c, when hertz_contact is off, still comes from the iteration with the linear c0.
-
-The geometry is linearised about the strike position (the paper's model: the strike point moves
-along the tool axis by S theta); a drive may swing the rocker through a few tenths of a radian
-before the strike, the impact itself happens at theta ~ 0.
+"""Rocker impact unit (seed rocker_impact_unit, eq. (1)-(2), (5)-(8); MODELS.md section 4): a
+rigid rocker on an elastic pivot support strikes a semi-infinite elastic rod; unilateral
+contact, linearised or Hertzian contact and bearing, events at contact begin/end and the peaks.
+Equations, events, variables and tests: the model card README.md in this folder.
 """
 from __future__ import annotations
 
