@@ -288,7 +288,7 @@ def test_stick_slip_under_pulsed_press_load():
     out, rows, _ = R.run_model(drive, motor.torque, 1.0, 1.2, H, "zoh",
                                u_extra=pulsed_load(),
                                sample=lambda d, t, x: states.append(
-                                   (t, d.modes.elements["b"].direction, x[2])))
+                                   (t, d.modes.elements["b"].direction.sign, x[2])))
     d = out["discrete"]
     assert d["elements"]["b"]["n_lock"] == 4 and d["elements"]["b"]["n_slip"] == 4
     assert d["n_pass"] == 0 and d["n_events"] == 8  # no command edge: input command stays 1
@@ -313,7 +313,7 @@ def test_pass_through_zero_when_the_brake_cannot_hold():
                                u_extra=lambda t: (-300.0, 0.0))
     d = out["discrete"]
     h = d["elements"]["h"]
-    assert d["n_pass"] == 1 and h["n_lock"] == 0 and h["direction"] == Direction.BACKWARD
+    assert d["n_pass"] == 1 and h["n_lock"] == 0 and h["direction"] == Direction.BACKWARD.sign
     assert d["n_events"] == 3  # command edge, ring breaks free, carrier passes zero
     assert out["w_h"] < -1.0 and out["period"] == 4
 

@@ -23,13 +23,18 @@ X = name_indices("PlanetaryClutchDrive", "state", STATE_NAMES)  # x[X.w_b]: stat
 NEVER = -1.0  # event-time outputs before the first such event
 
 
-class Direction(enum.IntEnum):
-    """How a friction element moves: the sign of its speed while sliding, 0 while locked (an
-    int, so friction torques and slip powers are -C d and d w as in the equations)."""
+class Direction(enum.Enum):
+    """How a friction element moves. `sign` is the sign of its speed while sliding, 0 while
+    locked: the d of F_k = -C_k d and of the slip power d w. A plain int attribute, not an
+    IntEnum: an IntEnum times a numpy float costs ~1.5 us (numpy's slow path), in every
+    right-hand side."""
 
     BACKWARD = -1
     LOCKED = 0
     FORWARD = 1
+
+    def __init__(self, sign: int):
+        self.sign = sign
 
 
 @dataclass
@@ -71,7 +76,7 @@ class Modes:
                 "n_pass": self.n_pass, "n_events": self.n_events,
                 "brakes": {k: {"engaging": b.engaging, "t0": b.t0, "M0": b.M0}
                            for k, b in self.brakes.items()},
-                "elements": {k: {"direction": int(e.direction), "t_lock": e.t_lock,
+                "elements": {k: {"direction": e.direction.sign, "t_lock": e.t_lock,
                                  "t_slip": e.t_slip, "n_lock": e.n_lock, "n_slip": e.n_slip}
                              for k, e in self.elements.items()}}
 
@@ -323,22 +328,23 @@ class PlanetaryClutchDrive(PhysicsModel):
              "h": self.brake_torque("h", t) + p.M_ch}
         return self.mass_matrix(u), Q, C
 
-    def _dirs(self) -> dict[str, Direction]:
+    def _signs(self) -> dict[str, int]:
+        """Direction.sign of each friction element (+1/-1 sliding, 0 locked)."""
         elements = self.modes.elements
-        return {k: elements[k].direction for k in ELEMENTS}
+        return {k: elements[k].direction.sign for k in ELEMENTS}
 
-    def _solve(self, t, u, dirs=None):
+    def _solve(self, t, u, signs=None):
         """Accelerations (dw_b, dw_h), friction torques F_k and capacities C_k in the modes
-        `dirs` (default: the current ones). Locked sets are {}, {j} or all three (two locked
+        `signs` (Direction.sign per element; default: the current ones). Locked sets are {}, {j} or all three (two locked
         members hold the third at rest by Willis); with all three locked the friction torques
         are statically indeterminate: F_a is chosen closest to 0 in its feasible interval and
         `slack` is the interval's width (negative: the rest cannot be held)."""
-        dirs = self._dirs() if dirs is None else dirs
+        signs = self._signs() if signs is None else signs
         M, Q, C = self._loads(t, u)
         G, N = self._geometry()
-        F = {k: -C[k] * d for k, d in dirs.items() if d}
+        F = {k: -C[k] * d for k, d in signs.items() if d}
         Qt = Q + sum((F[k] * G[k] for k in F), np.zeros(2))
-        locked = [k for k in ELEMENTS if not dirs[k]]
+        locked = [k for k in ELEMENTS if not signs[k]]
         slack = math.inf
         if not locked:
             det = M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]
@@ -378,12 +384,12 @@ class PlanetaryClutchDrive(PhysicsModel):
         break-free event to decide on the side of breaking free)."""
         for k, direction in (forced or {}).items():
             self.modes.elements[k].direction = direction
-        dirs = self._dirs()
+        signs = self._signs()
         zero = [k for k in ELEMENTS if k in zero and k not in (forced or {})]
         M, Q, C = self._loads(t, u)
         G, N = self._geometry()
-        Qt = Q + sum((-C[k] * dirs[k] * G[k] for k in ELEMENTS
-                      if k not in zero and dirs[k]), np.zeros(2))
+        Qt = Q + sum((-C[k] * signs[k] * G[k] for k in ELEMENTS
+                      if k not in zero and signs[k]), np.zeros(2))
         Cz = {k: shrink * C[k] for k in zero}
 
         def f(a):
@@ -414,10 +420,10 @@ class PlanetaryClutchDrive(PhysicsModel):
         return [k for k in ELEMENTS if elements[k].direction is Direction.LOCKED]
 
     def _record(self, t, before: dict) -> None:
-        """Count locks and break-frees between the modes `before` and now."""
+        """Count locks and break-frees between the modes `before` (`_signs()`) and now."""
         for k in ELEMENTS:
             element = self.modes.elements[k]
-            old, new = before[k], element.direction
+            old, new = before[k], element.direction.sign
             if old and not new:
                 element.n_lock += 1
                 element.t_lock = float(t)
@@ -473,7 +479,7 @@ class PlanetaryClutchDrive(PhysicsModel):
         if value != self.modes.command:
             self._apply_command(t, value)
         if not self._holds(t, u):
-            before = self._dirs()
+            before = self._signs()
             self._choose_modes(t, u, self._lock_set(), shrink=1.0 - 1e-9)
             self._record(t, before)
             self.modes.n_events += 1
@@ -521,8 +527,8 @@ class PlanetaryClutchDrive(PhysicsModel):
         w_b, w_h = x[X.w_b], x[X.w_h]
         e = self.modes.elements
         w_a = self.sun_speed(x)
-        slip_a, slip_b, slip_h = (e["a"].direction * w_a, e["b"].direction * w_b,
-                                  e["h"].direction * w_h)
+        slip_a, slip_b, slip_h = (e["a"].direction.sign * w_a, e["b"].direction.sign * w_b,
+                                  e["h"].direction.sign * w_h)
         return np.array([  # in the order of STATE_NAMES
             w_b, w_h, a[0], a[1],
             (C["b"] - p.M_cb) * slip_b,
@@ -582,7 +588,7 @@ class PlanetaryClutchDrive(PhysicsModel):
                     add(Event(EventKind.SLIP, k, Direction.BACKWARD), g_bwd, -1)
             else:  # w_k = G_k . (w_b, w_h) falls to zero
                 add(Event(EventKind.ZERO, k),
-                    lambda t, x, gk=G[k]: float(gk @ x[X.w_b:X.w_h + 1]), -int(direction))
+                    lambda t, x, gk=G[k]: float(gk @ x[X.w_b:X.w_h + 1]), -direction.sign)
         sign = 1.0 if self.modes.command == 0 else -1.0
         i_cmd = self.IN.command
         add(Event(EventKind.COMMAND), lambda t, x: sign * (u_of_t(t)[i_cmd] - 0.5), 1)
@@ -599,7 +605,7 @@ class PlanetaryClutchDrive(PhysicsModel):
         if event.kind is EventKind.TIME:
             return x
         modes.n_events += 1
-        before = self._dirs()
+        before = self._signs()
         if event.kind is EventKind.SLIP:  # the single locked member breaks free
             self._choose_modes(t, u, [], forced={event.element: event.direction})
         elif event.kind is EventKind.BREAK_REST:
@@ -614,7 +620,8 @@ class PlanetaryClutchDrive(PhysicsModel):
                 elements[j].direction = Direction.LOCKED
             x = self._zero_speeds(x)
             self._choose_modes(t, u, zero)
-            if elements[k].direction and k in MEMBERS:  # passed through zero without locking
+            if elements[k].direction is not Direction.LOCKED and k in MEMBERS:
+                # passed through zero without locking
                 modes.n_pass += 1
         elif event.kind is EventKind.COMMAND:
             modes.n_events -= 1  # _apply_command counts it
