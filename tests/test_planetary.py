@@ -37,8 +37,8 @@ import pytest
 import planetary_reference as R
 from crankfmu.runtime.model import ParameterError, held
 from crankfmu.models.induction_motor.induction_motor import InductionMotor
-from crankfmu.models.planetary_drive.planetary_drive import (Direction, PlanetaryClutchDrive,
-                                                             steady_state)
+from crankfmu.models.planetary_drive.planetary_drive import (Direction, Modes,
+                                                             PlanetaryClutchDrive, steady_state)
 
 T_END = 0.4   # s: engagement and stopping end near 0.17 s; the rest checks the held phase
 H = 1e-3      # s: communication step
@@ -338,6 +338,28 @@ def test_rollback_reproduces_the_step_bitwise():
     assert np.array_equal(results[0][0], results[1][0])
     assert results[0][1] == results[1][1]
     assert results[0][1]["elements"]["b"]["n_lock"] == 1
+
+
+def test_modes_survive_a_json_round_trip_exactly():
+    """The typed modes (Modes: brakes, per-element Direction and lock history, event counts)
+    go through the JSON an FMU state save uses and come back equal, field by field (dataclass
+    equality: a field that to_json forgot would come back as its default and fail). Taken in
+    the middle of a power-law engagement, after a break-free and with t_last finite, and at the
+    start (t_last = -inf, saved as None)."""
+    import json
+    drive, motor = make("engage", False, ["power_law"])
+    u = np.array([1.0, motor.torque(drive.p.w_a_start), 0, 0, 0])
+    x = drive.initial_state(u)
+    fresh = json.loads(json.dumps(drive.discrete_state()))
+    assert fresh["t_last"] is None and Modes.from_json(fresh) == drive.modes
+    for i in range(150):  # past the carrier's break-free and the power law's kink at t_c
+        x = drive.advance(i * H, x, H, held(u), 1e-10, 1e-10)
+    modes = drive.modes
+    assert modes.elements["h"].direction is Direction.FORWARD and modes.t_last > 0.0
+    assert modes.elements["h"].n_slip == 1 and modes.brakes["b"].engaging
+    restored = Modes.from_json(json.loads(json.dumps(drive.discrete_state())))
+    assert restored == modes and restored is not modes
+    assert restored.elements["h"].direction is Direction.FORWARD  # the enum, not its int
 
 
 def test_motor_start_from_rest_all_locked():

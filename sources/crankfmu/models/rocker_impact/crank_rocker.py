@@ -230,7 +230,8 @@ class CrankRockerHammer(RockerImpact):
         """Rocker (own J) and support, contact, crank + motor kinetic energy, rod spring
         (driven_crank: without the crank's kinetic energy, which the driver carries)."""
         stretch = self.rod(x, u)[4]
-        rocker = super().mechanical_energy(x, np.array([0.0, 0.0]))
+        no_drive = [0.0] * len(self.inputs)  # the motor's inertia is on the crank, not the rocker
+        rocker = super().mechanical_energy(x, no_drive)
         crank = 0.0
         if not self._driven:
             w = x[-3]
