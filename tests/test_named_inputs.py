@@ -106,3 +106,30 @@ def test_models_read_inputs_by_name_not_position(name):
         assert _same(expected, got), (name, effects)
         ran += not isinstance(expected, str)
     assert ran >= 1  # at least the default effects ran through a step
+
+
+@pytest.mark.parametrize("name", ["PlanetaryClutchDrive", "MillStandDrive", "RockerImpact",
+                                  "CrankRockerHammer"])
+def test_models_that_name_their_outputs_follow_the_declaration(name):
+    """These models build their many outputs by name (output_vector or a dict): declared in
+    reversed order, each output keeps its value (exact: the same computation)."""
+    cls = physics_class(name)
+    reversed_cls = type(cls.__name__, (cls,), {"outputs": tuple(reversed(cls.outputs))})
+    values = _input_values(cls)
+    u = [values[v.name] for v in cls.inputs]
+    model, other = cls(), reversed_cls()
+    x0 = list(model.initial_state(u))
+    assert list(other.initial_state(u)) == x0
+    y, y_reversed = model.output_values(0.0, x0, u), other.output_values(0.0, x0, u)
+    assert [y_reversed[other.output_index(v.name)] for v in cls.outputs] == list(y)
+
+
+def test_output_vector_names_what_is_missing_or_undeclared():
+    model = physics_class("PlanetaryClutchDrive")()
+    full = {name: 1.0 for name in model.OUT._fields}
+    assert model.output_vector(full) == [1.0] * len(full)
+    with pytest.raises(KeyError, match=r"PlanetaryClutchDrive: output values missing "
+                                       r"\['w_a'\], undeclared \['w_sun'\]"):
+        model.output_vector({("w_sun" if k == "w_a" else k): v for k, v in full.items()})
+    with pytest.raises(KeyError, match=r"missing \[\], undeclared \['spare'\]"):
+        model.output_vector(full | {"spare": 0.0})

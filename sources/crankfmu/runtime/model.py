@@ -263,6 +263,19 @@ class PhysicsModel:
     def output_index(self, name: str) -> int:
         return [v.name for v in self.outputs].index(name)
 
+    def output_vector(self, values: dict) -> list:
+        """The outputs in declaration order from a dict by name, for a model that builds many
+        outputs (a long positional list is as unclear as u[2]). KeyError naming the model and
+        the outputs it misses or does not declare."""
+        names = self.OUT._fields
+        if len(values) == len(names):
+            try:
+                return [values[name] for name in names]
+            except KeyError:
+                pass
+        missing, extra = sorted(set(names) - set(values)), sorted(set(values) - set(names))
+        raise KeyError(f"{self.model_name}: output values missing {missing}, undeclared {extra}")
+
     def step(self, t0: float, x0, h: float, u_of_t: InputFunction, rtol: float, atol) -> list:
         """`advance` under one work limit for the whole step (what the FMU calls): at most
         max_derivative_calls_per_step right-hand-side calls over all its event restarts, so a

@@ -260,7 +260,10 @@ class MillStandDrive(PhysicsModel):
         E_l = x[names.index("E_load")] if "E_load" in names else 0.0
         v = self.variant
         q_rank = (Q_RANK_GUIDED if self.p.guides_hold_skew == 1.0 else Q_RANK_FREE_SKEW)[v]
-        return np.array([i * w, i * phi, phi, w, xs, dx * w, a, T2, T4, self.preload(),
-                         self.stand_skew(), M_f, -M_f * w, E_f, self.load_force(phi, w), E_l,
-                         J, W_SEED[v], Q_SEED[v], q_rank,
-                         *self.shaft_load(phi, w, u[self.IN.flange_J])], dtype=float)
+        shaft_tau, shaft_J = self.shaft_load(phi, w, u[self.IN.flange_J])
+        return np.array(self.output_vector(dict(
+            flange_w=i * w, flange_phi=i * phi, phi=phi, w_crank=w, stand_x=xs, stand_v=dx * w,
+            stand_a=a, F_rod2=T2, F_rod4=T4, preload=self.preload(), stand_skew=self.stand_skew(),
+            M_friction=M_f, P_friction=-M_f * w, E_friction=E_f, F_load=self.load_force(phi, w),
+            E_load=E_l, J_reduced=J, W_mobility=W_SEED[v], q_malyshev=Q_SEED[v], q_rank=q_rank,
+            shaft_tau=shaft_tau, shaft_J=shaft_J)), dtype=float)

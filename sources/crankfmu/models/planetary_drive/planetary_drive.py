@@ -549,15 +549,17 @@ class PlanetaryClutchDrive(PhysicsModel):
         phi_a = -pr * x[X.phi_b] + (1 + pr) * x[X.phi_h]
         m = self.modes
         b, h = m.elements["b"], m.elements["h"]
-        return np.array([  # in the order of `outputs`
-            w_a, phi_a, x[X.w_h], x[X.phi_h],
-            w_a, x[X.w_b], x[X.w_h],
-            self.brake_torque("b", t), self.brake_torque("h", t), F["b"], F["h"], F["a"],
-            x[X.E_brake_b], x[X.E_brake_h], x[X.E_resist], x[X.W_sun], x[X.W_flange],
-            self.kinetic_energy(x, u),
-            float(self.period()), m.t_command, b.t_lock, b.t_slip, h.t_lock, h.t_slip,
-            float(b.n_lock), float(h.n_lock), float(m.n_events),
-        ], dtype=float)
+        return np.array(self.output_vector(dict(
+            sun_w=w_a, sun_phi=phi_a, flange_w=x[X.w_h], flange_phi=x[X.phi_h],
+            w_a=w_a, w_b=x[X.w_b], w_h=x[X.w_h],
+            M_tb=self.brake_torque("b", t), M_th=self.brake_torque("h", t),
+            tau_b=F["b"], tau_h=F["h"], tau_a=F["a"],
+            E_brake_b=x[X.E_brake_b], E_brake_h=x[X.E_brake_h], E_resist=x[X.E_resist],
+            W_sun=x[X.W_sun], W_flange=x[X.W_flange], E_kin=self.kinetic_energy(x, u),
+            period=float(self.period()), t_command=m.t_command,
+            t_lock_b=b.t_lock, t_slip_b=b.t_slip, t_lock_h=h.t_lock, t_slip_h=h.t_slip,
+            n_lock_b=float(b.n_lock), n_lock_h=float(h.n_lock), n_events=float(m.n_events),
+        )), dtype=float)
 
     # -- events ----------------------------------------------------------------------------
     def event_functions(self, u_of_t):
