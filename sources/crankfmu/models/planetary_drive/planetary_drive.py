@@ -111,6 +111,17 @@ class Event:
     time: float | None = None  # s, TIME events only
 
 
+LOCKED = Direction.LOCKED  # a module name: reading it off the Enum class costs ~50 ns, often
+
+# Events are values: built once here, not at every integration restart (constructing a frozen
+# dataclass costs ~1 us). TIME events carry their time and are built when needed.
+BREAK_REST_EVENT = Event(EventKind.BREAK_REST)
+COMMAND_EVENT = Event(EventKind.COMMAND)
+ZERO_EVENTS = {k: Event(EventKind.ZERO, k) for k in ELEMENTS}
+SLIP_EVENTS = {(k, d): Event(EventKind.SLIP, k, d) for k in ELEMENTS
+               for d in (Direction.FORWARD, Direction.BACKWARD)}
+
+
 class PlanetaryClutchDrive(PhysicsModel):
     model_name = "PlanetaryClutchDrive"
     description = ("Type-A planetary drive with friction brakes on ring and carrier: engagement, "
@@ -242,7 +253,7 @@ class PlanetaryClutchDrive(PhysicsModel):
             brakes={"b": BrakeState(True, 0.0, p.Mp_b) if stroke else BrakeState(False),
                     "h": BrakeState(False) if stroke else BrakeState(True, 0.0, p.Mp_h)},
             elements={"a": ElementState(Direction.FORWARD),
-                      "b": ElementState(Direction.LOCKED), "h": ElementState(Direction.LOCKED)})
+                      "b": ElementState(LOCKED), "h": ElementState(LOCKED)})
 
     def discrete_state(self) -> dict:
         return self.modes.to_json()
@@ -412,12 +423,12 @@ class PlanetaryClutchDrive(PhysicsModel):
         if len(stuck) == 2:  # two stuck hold the third (cannot happen for the minimiser)
             stuck = set(ELEMENTS)
         for k in zero:
-            self.modes.elements[k].direction = Direction.LOCKED if k in stuck else \
+            self.modes.elements[k].direction = LOCKED if k in stuck else \
                 (Direction.FORWARD if G[k] @ a > 0.0 else Direction.BACKWARD)
 
     def _lock_set(self) -> list[str]:
         elements = self.modes.elements
-        return [k for k in ELEMENTS if elements[k].direction is Direction.LOCKED]
+        return [k for k in ELEMENTS if elements[k].direction is LOCKED]
 
     def _record(self, t, before: dict) -> None:
         """Count locks and break-frees between the modes `before` (`_signs()`) and now."""
@@ -449,8 +460,8 @@ class PlanetaryClutchDrive(PhysicsModel):
         """1 idle, 2 engagement, 3 working stroke, 4 stopping."""
         elements = self.modes.elements
         if self.modes.command:
-            return 3 if elements["b"].direction is Direction.LOCKED else 2
-        return 1 if elements["h"].direction is Direction.LOCKED else 4
+            return 3 if elements["b"].direction is LOCKED else 2
+        return 1 if elements["h"].direction is LOCKED else 4
 
     def _apply_command(self, t, value: int) -> None:
         modes = self.modes
@@ -516,7 +527,7 @@ class PlanetaryClutchDrive(PhysicsModel):
         return np.array([10.0, 10.0, w / self.ratio, w / (1 + self.ratio), E, E, E, E, E])
 
     def sun_speed(self, x) -> float:
-        if self.modes.elements["a"].direction is Direction.LOCKED:
+        if self.modes.elements["a"].direction is LOCKED:
             return 0.0
         pr = self.ratio
         return -pr * x[X.w_b] + (1 + pr) * x[X.w_h]
@@ -573,10 +584,10 @@ class PlanetaryClutchDrive(PhysicsModel):
 
         locked = self._lock_set()
         if len(locked) == 3:  # all at rest: the feasible interval of F_a closes
-            add(Event(EventKind.BREAK_REST), lambda t, x: self._solve(t, u_of_t(t))[3], -1)
+            add(BREAK_REST_EVENT, lambda t, x: self._solve(t, u_of_t(t))[3], -1)
         for k in ELEMENTS:
             direction = self.modes.elements[k].direction
-            if direction is Direction.LOCKED:
+            if direction is LOCKED:
                 if len(locked) == 1:
                     def g_fwd(t, x, k=k):  # F_k -> -C_k: breaks free forwards
                         _, F, C, _ = self._solve(t, u_of_t(t))
@@ -586,14 +597,14 @@ class PlanetaryClutchDrive(PhysicsModel):
                         _, F, C, _ = self._solve(t, u_of_t(t))
                         return C[k] - F[k]
 
-                    add(Event(EventKind.SLIP, k, Direction.FORWARD), g_fwd, -1)
-                    add(Event(EventKind.SLIP, k, Direction.BACKWARD), g_bwd, -1)
+                    add(SLIP_EVENTS[k, Direction.FORWARD], g_fwd, -1)
+                    add(SLIP_EVENTS[k, Direction.BACKWARD], g_bwd, -1)
             else:  # w_k = G_k . (w_b, w_h) falls to zero
-                add(Event(EventKind.ZERO, k),
-                    lambda t, x, gk=G[k]: float(gk @ x[X.w_b:X.w_h + 1]), -direction.sign)
+                add(ZERO_EVENTS[k], lambda t, x, gk=G[k]: float(gk @ x[X.w_b:X.w_h + 1]),
+                    -direction.sign)
         sign = 1.0 if self.modes.command == 0 else -1.0
         i_cmd = self.IN.command
-        add(Event(EventKind.COMMAND), lambda t, x: sign * (u_of_t(t)[i_cmd] - 0.5), 1)
+        add(COMMAND_EVENT, lambda t, x: sign * (u_of_t(t)[i_cmd] - 0.5), 1)
         for tb in self._breakpoints():
             add(Event(EventKind.TIME, time=tb), lambda t, x, tb=tb: t - tb, 1)
         self._events = events
@@ -614,15 +625,15 @@ class PlanetaryClutchDrive(PhysicsModel):
             self._choose_modes(t, u, list(ELEMENTS), shrink=1.0 - 1e-9)
         elif event.kind is EventKind.ZERO:  # member reaches zero speed: lock it if it can
             k = event.element
-            elements[k].direction = Direction.LOCKED
+            elements[k].direction = LOCKED
             zero = self._lock_set()
             if len(zero) >= 2:
                 zero = list(ELEMENTS)
             for j in zero:
-                elements[j].direction = Direction.LOCKED
+                elements[j].direction = LOCKED
             x = self._zero_speeds(x)
             self._choose_modes(t, u, zero)
-            if elements[k].direction is not Direction.LOCKED and k in MEMBERS:
+            if elements[k].direction is not LOCKED and k in MEMBERS:
                 # passed through zero without locking
                 modes.n_pass += 1
         elif event.kind is EventKind.COMMAND:
