@@ -18,27 +18,36 @@ import warnings
 import numpy as np
 
 from .base import Master, evaluate
+from .options import EXTRAPOLATION, TOLERANCE, Option, OptionError
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 5.0
+MIN_STEP = Option("min_step", float, "s", 1e-6, "the smallest step a variable-step master "
+                  "takes (accepted whatever its error)", positive=True)
+MAX_STEP = Option("max_step", float, "s", 1e-2, "the largest step a variable-step master takes",
+                  positive=True)
 
 
 class Adaptive(Master):
     name = "adaptive"
+    options = (EXTRAPOLATION, TOLERANCE, MIN_STEP, MAX_STEP)
     needs_rollback = True
     variable_step = True
     uses_error_scale = True
 
     def __init__(self, system, settings):
         super().__init__(system, settings)
-        self.tolerance = float(settings.tolerance)
-        self.min_step, self.max_step = float(settings.min_step), float(settings.max_step)
-        if self.min_step > self.max_step:
-            raise ValueError(f"[master].min_step = {self.min_step} exceeds max_step = "
-                             f"{self.max_step}")
+        self.tolerance = self.option("tolerance")
+        self.min_step, self.max_step = self.option("min_step"), self.option("max_step")
         self.next_step = self._clip(float(settings.step))
         self.counts = {"accepted_steps": 0, "rejected_steps": 0, "accepted_above_tolerance": 0,
                        "smallest_step": None, "largest_step": None}
         self.extra_statistics = self.counts
+
+    @classmethod
+    def check_options(cls, values: dict) -> None:
+        if values["min_step"] > values["max_step"]:
+            raise OptionError(f"[master].min_step: {values['min_step']!r} exceeds max_step = "
+                              f"{values['max_step']!r}")
 
     def _clip(self, h: float) -> float:
         return min(max(h, self.min_step), self.max_step)
