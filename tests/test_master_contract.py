@@ -205,6 +205,7 @@ def test_input_feed_gives_a_foreign_fmu_the_held_midpoint_value():
     over the step), with one warning."""
     written = []
     system = SimpleNamespace(fmus={"f": _fmu("F", inputs=["u"])}, in_names={"f": ["u"]},
+                             out_names={"g": ["y"]},
                              in_sources={"f": [("g", 0)]},
                              write_inputs={"f": lambda v: written.append(v.tolist())})
     feed = InputFeed(system)
@@ -232,3 +233,29 @@ def test_port_power_integrates_a_constant_port_exactly():
     report = power.report()
     assert report["ports"][0]["energy_receiver_J"] == 3.0 == report["ports"][0]["energy_driver_J"]
     assert report["max_relative_mismatch"] == 0.0
+
+
+def test_float_paths_give_numpys_floats():
+    """The adaptive master's error and prediction run on Python floats (cheaper for a few
+    values); they must give numpy's floats bit for bit (the scenes' results stay identical),
+    and a NaN must come through as numpy's maximum and max let it."""
+    from crankfmu.cosim.masters.adaptive import _evaluate
+    from crankfmu.cosim.masters.history import evaluate
+
+    rng = np.random.default_rng(3)
+    for depth in (1, 2, 3):
+        rows = rng.normal(size=(depth, 4)) * 10.0 ** rng.integers(-8, 8, size=(depth, 4))
+        for s in (1e-3, 0.37, 2.5e-6):
+            assert _evaluate(rows.tolist(), s) == evaluate(rows, s).tolist()
+    system = SimpleNamespace(outputs={"a": np.zeros(4)}, out_names={"a": list("wxyz")},
+                             fmus={"a": SimpleNamespace(variables={
+                                 n: SimpleNamespace(nominal=nom) for n, nom in
+                                 zip("wxyz", (None, "2.5", "1e-3", None))})})
+    scale = ErrorScale(system)
+    for _ in range(5):
+        values = rng.normal(size=4) * 10.0 ** rng.integers(-4, 4, size=4)
+        assert scale.of_floats("a", values.tolist()) == scale.of("a", values).tolist()
+        scale.update({"a": values})
+    with_nan = np.array([1.0, np.nan, 0.0, -3.0])
+    got, want = scale.of_floats("a", with_nan.tolist()), scale.of("a", with_nan).tolist()
+    assert np.isnan(got[1]) and np.isnan(want[1]) and got[::2] == want[::2]

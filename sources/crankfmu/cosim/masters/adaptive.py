@@ -15,9 +15,7 @@ from __future__ import annotations
 
 import warnings
 
-import numpy as np
-
-from .base import Master, evaluate
+from .base import Master
 from .options import EXTRAPOLATION, TOLERANCE, Option, OptionError
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 5.0
@@ -56,9 +54,11 @@ class Adaptive(Master):
         order = min(self.extrapolation, len(self.history.times) - 1)
         states = self.save_states()
         coefficients = self.source_coefficients(t, order)
+        rows = {c: coefficients[c] for c in self.system.order}  # the same rows as the sweep's
+        as_floats = {c: r.tolist() for c, r in rows.items()}
         while True:
-            predicted = {c: evaluate(coefficients[c], h) for c in self.system.order}
-            self.sequential_sweep(t, h, self.extrapolation)
+            predicted = {c: _evaluate(r, h) for c, r in as_floats.items()}
+            self.sequential_sweep(t, h, self.extrapolation, rows)
             error = self._error(predicted)
             factor = SAFETY * error ** (-1.0 / (order + 1)) if error > 0 else MAX_FACTOR
             if error <= 1.0 or h <= self.min_step * (1 + 1e-9):
@@ -72,8 +72,24 @@ class Adaptive(Master):
         return h
 
     def _error(self, predicted: dict) -> float:
-        errors = [np.max(np.abs(y - predicted[c]) / (self.tolerance * self.error_scale(c, y)))
-                  for c, y in self.system.outputs.items() if y.size]
+        """In Python floats (a few values per component): the operations of the numpy form
+        max(|y - P| / (tolerance * scale)), so the same floats; a NaN makes a component's
+        error NaN, as numpy's max does."""
+        errors = []
+        tolerance = self.tolerance
+        for c, y in self.system.outputs.items():
+            if not y.size:
+                continue
+            values = y.tolist()
+            worst = -1.0
+            for v, p, s in zip(values, predicted[c], self.scales.of_floats(c, values)):
+                e = abs(v - p) / (tolerance * s)
+                if e != e:  # NaN
+                    worst = e
+                    break
+                if e > worst:
+                    worst = e
+            errors.append(worst)
         return float(max(errors, default=0.0))
 
     def _count(self, t: float, h: float, error: float) -> None:
@@ -88,3 +104,14 @@ class Adaptive(Master):
                               f"{self.min_step:g} s with error {error:.3g} x tolerance (further "
                               f"ones are counted in the statistics: accepted_above_tolerance)",
                               RuntimeWarning, stacklevel=2)
+
+
+def _evaluate(rows: list, s: float) -> list[float]:
+    """masters.history.evaluate on Taylor rows as lists: the same operations, so the same
+    floats."""
+    if len(rows) == 1:
+        return rows[0]
+    if len(rows) == 2:
+        return [a + b * s for a, b in zip(*rows)]
+    c = 0.5 * s * s
+    return [a + b * s + d * c for a, b, d in zip(*rows)]

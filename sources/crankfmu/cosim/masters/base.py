@@ -196,11 +196,15 @@ class Master:
         for comp in system.order:
             system.refresh_outputs(comp)
 
-    def sequential_sweep(self, t: float, h: float, order: int) -> None:
+    def sequential_sweep(self, t: float, h: float, order: int, start_rows: dict | None = None
+                         ) -> None:
         """Gauss-Seidel: components step in order; a source that already reached t + h
-        contributes that newest point (interpolation), the others are extrapolated."""
+        contributes that newest point (interpolation), the others are extrapolated.
+        `start_rows`: the extrapolation rows already computed (comp -> rows), reused."""
         system = self.system
         coefficients = self.source_coefficients(t, order)
+        if start_rows:
+            coefficients.update(start_rows)
         for comp in system.order:
             self.advance_component(comp, t, h, self.gather(comp, coefficients))
             coefficients.reached(comp, t + h, system.refresh_outputs(comp))

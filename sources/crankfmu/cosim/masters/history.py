@@ -17,7 +17,8 @@ def taylor_rows(s, values) -> np.ndarray:
     is values[0] exactly when s[0] = 0."""
     if len(s) == 1:
         return np.array([values[0]], dtype=float)
-    columns = zip(*[np.asarray(v).tolist() for v in values])
+    columns = zip(*[v.tolist() if type(v) is np.ndarray else np.asarray(v).tolist()
+                    for v in values])
     if len(s) == 2:
         x0, x1 = s
         a = 1.0 / (x1 - x0)

@@ -30,6 +30,8 @@ class InputFeed:
         groups = self.groups[comp]
         if len(groups) == 1:  # one source feeds every input: a column selection
             src, _, indices = groups[0]
+            if indices is None:  # all its outputs in order: the rows themselves (never written)
+                return coefficients[src]
             return coefficients[src].take(indices, axis=1)
         depth = max((len(coefficients[src]) for src, _, _ in groups), default=1)
         rows = np.zeros((depth, len(self.system.in_names[comp])))
@@ -73,7 +75,10 @@ def _input_groups(system, comp: str) -> list[tuple[str, np.ndarray, np.ndarray]]
     for pos, (src, k) in enumerate(system.in_sources[comp]):
         groups.setdefault(src, ([], []))[0].append(pos)
         groups[src][1].append(k)
-    return [(src, np.array(p), np.array(i)) for src, (p, i) in groups.items()]
+    out = [(src, np.array(p), np.array(i)) for src, (p, i) in groups.items()]
+    if len(out) == 1 and out[0][2].tolist() == list(range(len(system.out_names[out[0][0]]))):
+        out = [(out[0][0], out[0][1], None)]  # the source's outputs, all and in order
+    return out
 
 
 def _derivative_writer(system, comp: str):

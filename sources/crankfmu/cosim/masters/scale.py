@@ -21,16 +21,29 @@ class ErrorScale:
     `nominal` attribute, else 1 in its SI unit)."""
 
     def __init__(self, system):
-        self.scale = {c: np.zeros(len(v)) for c, v in system.outputs.items()}
-        self.nominal = {c: np.array([_nominal(system.fmus[c], n) for n in system.out_names[c]])
+        # Python floats: a few values per component, updated every step (numpy's per-call cost
+        # was most of it); the same comparisons, so the same floats
+        self.scale = {c: [0.0] * len(v) for c, v in system.outputs.items()}
+        self.nominal = {c: [_nominal(system.fmus[c], n) for n in system.out_names[c]]
                         for c in system.fmus}
 
     def update(self, outputs: dict) -> None:
+        """A NaN output makes the scale NaN, as numpy's maximum does."""
         for c, v in outputs.items():
-            np.maximum(self.scale[c], np.abs(v), out=self.scale[c])
+            self.scale[c] = [a if a >= abs(b) else abs(b)
+                             for a, b in zip(self.scale[c], v.tolist())]
 
     def of(self, comp: str, values: np.ndarray) -> np.ndarray:
         return np.maximum(np.maximum(self.scale[comp], np.abs(values)), self.nominal[comp])
+
+    def of_floats(self, comp: str, values: list[float]) -> list[float]:
+        """`of` in Python floats (a NaN value gives NaN, as numpy's maximum does)."""
+        out = []
+        for s, y, n in zip(self.scale[comp], values, self.nominal[comp]):
+            y = abs(y)
+            m = s if s >= y or s != s else y
+            out.append(m if m >= n else n if m == m else m)
+        return out
 
 
 def check_finite(t: float, outputs: dict, out_names: dict) -> None:
