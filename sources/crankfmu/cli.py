@@ -38,6 +38,7 @@ def add_master_options(p: argparse.ArgumentParser) -> None:
         takers = [n for n, c in MASTERS.items() if option in c.options]
         p.add_argument(f"--{option.name.replace('_', '-')}", type=option.kind,
                        choices=option.choices, dest=f"master_{option.name}",
+                       metavar=None if option.choices else option.name.upper(),
                        help=f"{option.describe()} (masters: {', '.join(takers)}; "
                             f"[master].{option.name})")
     p.add_argument("--fmu-tolerance", type=float,

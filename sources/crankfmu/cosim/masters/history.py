@@ -17,8 +17,8 @@ def taylor_rows(s, values) -> np.ndarray:
     is values[0] exactly when s[0] = 0."""
     if len(s) == 1:
         return np.array([values[0]], dtype=float)
-    columns = zip(*[v.tolist() if type(v) is np.ndarray else np.asarray(v).tolist()
-                    for v in values])
+    columns = zip(*[v if type(v) is list else v.tolist() if type(v) is np.ndarray
+                    else np.asarray(v).tolist() for v in values])
     if len(s) == 2:
         x0, x1 = s
         a = 1.0 / (x1 - x0)
@@ -57,13 +57,24 @@ class History:
         self.depth = depth
         self.times: list[float] = []
         self.values: list[dict[str, np.ndarray]] = []
+        self.floats: list[dict[str, list]] = []  # the same values as lists, made when first read
 
     def push(self, t: float, outputs: dict[str, np.ndarray]) -> None:
         """Keep the arrays themselves: System.refresh_outputs makes a new one per read."""
         self.times.append(t)
         self.values.append(dict(outputs))
+        self.floats.append({})
         if len(self.times) > self.depth:
-            del self.times[0], self.values[0]
+            del self.times[0], self.values[0], self.floats[0]
+
+    def _floats(self, i: int, comp: str) -> list:
+        """Point i's values of comp as Python floats (a point serves up to three steps'
+        polynomials: converted once)."""
+        cache = self.floats[i]
+        found = cache.get(comp)
+        if found is None:
+            found = cache[comp] = self.values[i][comp].tolist()
+        return found
 
     def rows(self, comp: str, t: float, order: int, newest=None) -> np.ndarray:
         """Taylor rows at t of comp's outputs: the polynomial through the last order + 1 points
@@ -74,7 +85,7 @@ class History:
         k = min(order + (newest is None), len(self.times))  # points taken from the history
         # Newton order: the point at t (the newest in the history) first, then t + h if given
         times = self.times[-1:-k - 1:-1]
-        values = [v[comp] for v in self.values[-1:-k - 1:-1]]
+        values = [self._floats(i, comp) for i in range(-1, -k - 1, -1)]
         if newest is not None:
             times.insert(1, newest[0])
             values.insert(1, newest[1])
