@@ -295,15 +295,16 @@ def _variable_steps(master, scene: Scene, progress):
     [record].interval after the last row (every accepted point without an interval), and at
     stop_time. A step that would leave less than min_step before stop_time is stretched to it."""
     t, stop = scene.start_time, scene.stop_time
+    min_step = scene.master.min_step  # a variable-step master's declared option
     interval = scene.record_interval or 0.0
     last_row, step = t, 0
     bar = _progress(None, progress, scene.name, total=stop - t)
     while t < stop:
         h = master.next_step
-        if t + h > stop - scene.master.min_step:
+        if t + h > stop - min_step:
             h = stop - t
         taken = master.step(t, h)
-        t_new = stop if taken == h and t + h >= stop - scene.master.min_step else t + taken
+        t_new = stop if taken == h and t + h >= stop - min_step else t + taken
         step += 1
         if bar is not None:
             bar.update(t_new - t)

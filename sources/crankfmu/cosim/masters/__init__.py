@@ -37,12 +37,19 @@ def master_class(algorithm: str) -> type[Master]:
 
 
 def all_options() -> dict[str, Option]:
-    """Every option some master declares, by key (the command line offers each once)."""
-    out: dict[str, Option] = {}
-    for cls in MASTERS.values():
-        for option in cls.options:
-            out.setdefault(option.name, option)
-    return out
+    """Every option some master declares, by key (the command line offers each once); kept
+    until MASTERS changes (the scene's settings read options through it)."""
+    key = tuple(MASTERS.values())
+    if _ALL_OPTIONS[0] != key:
+        out: dict[str, Option] = {}
+        for cls in key:
+            for option in cls.options:
+                out.setdefault(option.name, option)
+        _ALL_OPTIONS[:] = [key, out]
+    return _ALL_OPTIONS[1]
+
+
+_ALL_OPTIONS: list = [None, {}]  # [the MASTERS classes it was made from, the options]
 
 
 def make_master(algorithm: str, system, settings) -> Master:
