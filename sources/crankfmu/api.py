@@ -111,10 +111,12 @@ def load_scene(scene):
     return _load(scene)
 
 
-def prepare(scene, *, stop_time=None, step=None, algorithm=None, extrapolation=None,
-            parameters=None, inputs=None):
+def prepare(scene, *, stop_time=None, step=None, algorithm=None, parameters=None, inputs=None,
+            **master_options):
     """A copy of `scene` (or the scene loaded from that path) with the settings applied and
-    checked as a scene file's would be."""
+    checked as a scene file's would be. `master_options`: the masters' own options as keyword
+    arguments (extrapolation=2, tolerance=1e-4, min_step=..., as each master declares them:
+    crankfmu.cosim.masters.MASTERS[name].options)."""
     from .errors import MAX_TIME
     from .system.scene import Scene, SceneError, _number, check_run_size, set_input, set_value
     scene = copy.deepcopy(scene) if isinstance(scene, Scene) else load_scene(scene)
@@ -128,25 +130,25 @@ def prepare(scene, *, stop_time=None, step=None, algorithm=None, extrapolation=N
         if scene.stop_time <= scene.start_time:
             raise SceneError(scene.path, "stop_time", f"must exceed start_time = "
                                                       f"{scene.start_time}")
-    for name, value in (("step", step), ("algorithm", algorithm),
-                        ("extrapolation", extrapolation)):
+    for name, value in (("step", step), ("algorithm", algorithm), *master_options.items()):
         if value is not None:
             set_value(scene, f"master.{name}", value, name)
     check_run_size(scene)
     return scene
 
 
-def simulate(scene, *, stop_time=None, step=None, algorithm=None, extrapolation=None,
-             parameters=None, inputs=None, out=None, progress=False, plot=False,
-             fmu_dir=None, log=False) -> Result:
+def simulate(scene, *, stop_time=None, step=None, algorithm=None, parameters=None,
+             inputs=None, out=None, progress=False, plot=False, fmu_dir=None, log=False,
+             **master_options) -> Result:
     """Co-simulate the scene with its master (crankfmu.cosim.runner.run_scene) and return the
     recorded values. `out`: a CSV path to write (the JSON sidecar beside it, and with
     `plot=True` a PNG); nothing is written without it. `fmu_dir`: the built FMUs (default:
     fmus/ beside the scene's scenarios/ folder, else the package's build folder; stale or
-    missing FMUs are built there, never into the working folder)."""
+    missing FMUs are built there, never into the working folder). `master_options`: the
+    chosen master's own options (extrapolation=2, tolerance=1e-4, ...; see `prepare`)."""
     from .cosim.runner import RunOptions, run_scene
     scene = prepare(scene, stop_time=stop_time, step=step, algorithm=algorithm,
-                    extrapolation=extrapolation, parameters=parameters, inputs=inputs)
+                    parameters=parameters, inputs=inputs, **master_options)
     result = run_scene(scene, RunOptions(out=Path(out) if out is not None else None,
                                          plot=plot, fmu_dir=fmu_dir, progress=progress,
                                          verbose_log=log))

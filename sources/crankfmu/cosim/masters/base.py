@@ -1,9 +1,15 @@
 """The contract every master algorithm implements (after scipy's OdeSolver).
 
 A master advances a wired `System` (FMUs, links, external inputs) over communication steps.
-Implementers subclass `Master` and provide:
+A new master is one file with a `Master` subclass and one line in MASTERS
+(crankfmu/cosim/masters/__init__.py); README "Adding a master" walks through an example
+(tests/examples/masters/halving.py). Implementers provide:
 
     name              the algorithm's name in scenes and on the command line (a key of MASTERS).
+    options           the [master] keys it takes, a tuple of `Option` (name, type, unit, default,
+                      allowed range, help; crankfmu.cosim.masters.options). The scene, the
+                      command line, the Python API, SSP files and the sidecar read them from
+                      here; the master reads the checked values with `self.option(name)`.
     _step(t, h)       advance every FMU from t; on return every FMU is at t + taken and
                       `system.outputs` holds the connected outputs at t + taken, and
                       `self.seen[comp]` = (rows, taken): the inputs each FMU saw over the step
@@ -13,163 +19,95 @@ Implementers subclass `Master` and provide:
     needs_rollback    True if _step calls `save_states`/`restore_states`; the base then checks
                       canGetAndSetFMUstate for every FMU and names the one that cannot.
     variable_step     True if the master chooses its steps: the runner then asks `next_step`
-                      for the next step to try and records at the accepted points.
-    extra_statistics  dict of master-level figures for the JSON sidecar (iterations, rejections).
+                      for the next step to try and records at the accepted points; such a
+                      master declares the options min_step and max_step [s] (the runner and
+                      the step-count check read them).
+    startup_corrector True for a fixed-step master whose first order-2 step is repeated with
+                      interpolated inputs (`_corrected_first_step`).
     uses_error_scale  True if the class calls `error_scale` (the base then tracks each output's
                       largest magnitude).
+    solves_algebraic_loops  True if a converged step satisfies an algebraic loop at t + h.
+    extra_statistics  dict of master-level figures for the JSON sidecar (iterations, rejections).
+    check_options(values)   (classmethod, optional) checks between options (min_step <=
+                      max_step); raises OptionError naming the key.
 
-The base class provides `initialize(t0)`, the public `step(t, h)` (calls `_step`, then keeps the
-communication-point history and the port energies), the input polynomials (`source_coefficients`,
-`gather`, `advance_component`), the two sweeps (`parallel_sweep`: Jacobi, `sequential_sweep`:
-Gauss-Seidel), `check_finite`, and statistics per FMU.
+The base class composes parts that are each testable alone:
+    history.History, Coefficients   the last communication points; Taylor rows of the input
+                                    polynomials (extrapolation, interpolation)
+    inputs.InputFeed                rows to each FMU: companion inputs X_d1, X_d2, or the held
+                                    midpoint value for a foreign FMU (with one warning)
+    rollback.Rollback               get/set/free FMU states
+    power.PortPower                 the port energies (the run's coupling-error figure)
+    scale.ErrorScale, check_finite  what tolerances are relative to; divergence
+and provides `initialize(t0)`, the public `step(t, h)` (calls `_step`, then keeps the
+communication-point history and the port energies), the two sweeps (`parallel_sweep`: Jacobi,
+`sequential_sweep`: Gauss-Seidel), and statistics per FMU.
 
 Inputs over a step are polynomials of degree <= 2, given as Taylor rows at the step start
-(value, first and second derivative). They reach crankfmu FMUs through the companion inputs
-`X_d1`, `X_d2` (docs/architecture.md); an FMU without them gets the polynomial's value at the
-step's midpoint, held (one warning per FMU: the order of accuracy drops to at most 2 there).
+(value, first and second derivative).
 """
 from __future__ import annotations
 
-import math
-import warnings
-
 import numpy as np
 
+from .history import HISTORY_DEPTH, Coefficients, History, evaluate, taylor_rows
+from .inputs import InputFeed
+from .options import Option, OptionError
 from .power import PortPower
+from .rollback import Rollback
+from .scale import RUNAWAY_LIMIT, DivergenceError, ErrorScale, check_finite
 
-RUNAWAY_LIMIT = 1e12  # |value| beyond this in a connected output is taken as divergence
-HISTORY_DEPTH = 3     # communication points kept: enough for a quadratic
-
-
-class DivergenceError(RuntimeError):
-    """The run left the finite, bounded range; names time, component and variable."""
-
-    def __init__(self, time: float, component: str, variable: str, value: float):
-        self.time, self.component, self.variable, self.value = time, component, variable, value
-        super().__init__(f"diverged at t = {time:.6g} s: {component}.{variable} = {value!r}")
-
-
-def taylor_rows(s, values) -> np.ndarray:
-    """Taylor rows at s = 0 (value, 1st, 2nd derivative) of the polynomial through the points
-    (s[i], values[i]) (1 to 3 points; put the point nearest 0 first). Newton's divided
-    differences, in Python floats: for a few values per component cheaper than numpy (a
-    Vandermonde solve cost more than the rest of a step). Built on differences, the rows of a
-    constant signal are exact (derivatives exactly 0: an FMU sees it held), and the value row
-    is values[0] exactly when s[0] = 0."""
-    if len(s) == 1:
-        return np.array([values[0]], dtype=float)
-    columns = zip(*[np.asarray(v).tolist() for v in values])
-    if len(s) == 2:
-        x0, x1 = s
-        a = 1.0 / (x1 - x0)
-        r0, r1 = [], []
-        for p, q in columns:
-            f01 = a * (q - p)
-            r0.append(p - x0 * f01)
-            r1.append(f01)
-        return np.array([r0, r1]) if r0 else np.zeros((2, 0))
-    x0, x1, x2 = s
-    a, b, c = 1.0 / (x1 - x0), 1.0 / (x2 - x1), 1.0 / (x2 - x0)
-    r0, r1, r2 = [], [], []
-    for p, q, r in columns:  # p(s) = p + f01 (s - x0) + f012 (s - x0)(s - x1)
-        f01 = a * (q - p)
-        f012 = c * (b * (r - q) - f01)
-        r0.append(p - x0 * f01 + x0 * x1 * f012)
-        r1.append(f01 - (x0 + x1) * f012)
-        r2.append(2.0 * f012)
-    return np.array([r0, r1, r2]) if r0 else np.zeros((3, 0))
-
-
-def evaluate(rows: np.ndarray, s: float) -> np.ndarray:
-    """The polynomial given by Taylor rows, at s after their origin."""
-    out = rows[0].copy()
-    if len(rows) > 1:
-        out += rows[1] * s
-    if len(rows) > 2:
-        out += rows[2] * (0.5 * s * s)
-    return out
-
-
-class History:
-    """The last communication points: times and each component's connected outputs."""
-
-    def __init__(self, depth: int = HISTORY_DEPTH):
-        self.depth = depth
-        self.times: list[float] = []
-        self.values: list[dict[str, np.ndarray]] = []
-
-    def push(self, t: float, outputs: dict[str, np.ndarray]) -> None:
-        """Keep the arrays themselves: System.refresh_outputs makes a new one per read."""
-        self.times.append(t)
-        self.values.append(dict(outputs))
-        if len(self.times) > self.depth:
-            del self.times[0], self.values[0]
-
-    def rows(self, comp: str, t: float, order: int, newest=None) -> np.ndarray:
-        """Taylor rows at t of comp's outputs: the polynomial through the last order + 1 points
-        (fewer at the start of a run); `newest` = (t_new, values) is a point after t that comes
-        first (interpolation)."""
-        if order == 0:  # the common case, kept cheap: hold the newest value
-            return (newest[1] if newest is not None else self.values[-1][comp])[None, :]
-        k = min(order + (newest is None), len(self.times))  # points taken from the history
-        # Newton order: the point at t (the newest in the history) first, then t + h if given
-        times = self.times[-1:-k - 1:-1]
-        values = [v[comp] for v in self.values[-1:-k - 1:-1]]
-        if newest is not None:
-            times.insert(1, newest[0])
-            values.insert(1, newest[1])
-        return taylor_rows([x - t for x in times], values)
-
-
-class Coefficients(dict):
-    """Taylor rows at t of each component's connected outputs, computed when first read (a
-    Gauss-Seidel sweep never reads the first component's extrapolation or the last one's
-    interpolation)."""
-
-    def __init__(self, history: History, t: float, order: int, newest: dict | None = None):
-        super().__init__()
-        self.history, self.t, self.order = history, t, order
-        self.newest = dict(newest) if newest else {}
-
-    def __missing__(self, comp: str) -> np.ndarray:
-        rows = self[comp] = self.history.rows(comp, self.t, self.order, self.newest.get(comp))
-        return rows
-
-    def reached(self, comp: str, t_new: float, values: np.ndarray) -> None:
-        """comp is at t_new with `values`: from now on its rows interpolate through that point."""
-        self.newest[comp] = (t_new, values)
-        self.pop(comp, None)
+__all__ = ["Coefficients", "DivergenceError", "HISTORY_DEPTH", "History", "Master",
+           "RUNAWAY_LIMIT", "evaluate", "taylor_rows"]
 
 
 class Master:
     name = "base"
+    options: tuple[Option, ...] = ()
     needs_rollback = False
     variable_step = False
     startup_corrector = False  # fixed-step masters: see _corrected_first_step
     uses_error_scale = False   # True: keep `scale` (each output's largest magnitude) per step
+    solves_algebraic_loops = False
 
     def __init__(self, system, settings):
+        """`settings`: the scene's [master] (crankfmu.system.scene.Master); this master
+        reads its own options from it, checked against their declaration."""
         self.system = system
         self.settings = settings
-        self.extrapolation = int(settings.extrapolation)
-        if self.needs_rollback:
-            for name, fmu in system.fmus.items():
-                if not fmu.can_rollback:
-                    raise ValueError(f"master {self.name} rolls FMUs back, but {name} "
-                                     f"({fmu.path.name}) has canGetAndSetFMUstate = false")
-        self.can_rollback = all(f.can_rollback for f in system.fmus.values())
+        self.values = self.read_options(settings)
+        self.extrapolation = self.values.get("extrapolation", 0)
+        self.rollback = Rollback(system, self.name, self.needs_rollback)
+        self.can_rollback = self.rollback.available
         self.history = History()
+        self.inputs = InputFeed(system)
         self.power = PortPower(system)
+        self.scales = ErrorScale(system)
         self.seen: dict[str, tuple] = {}
         self.extra_statistics: dict = {}
         self.time = None
-        self._groups = {c: _input_groups(system, c) for c in system.fmus}
-        self._derivative_writer = {c: _derivative_writer(system, c) for c in system.fmus}
-        self._derivatives_set = dict.fromkeys(system.fmus, False)
-        self._warned_foreign: set[str] = set()
-        self.scale = {c: np.zeros(len(v)) for c, v in system.outputs.items()}
-        self._nominal = {c: np.array([_nominal(system.fmus[c], n) for n in system.out_names[c]])
-                         for c in system.fmus}
+
+    # -- options --------------------------------------------------------------------------
+    @classmethod
+    def read_options(cls, settings) -> dict:
+        """{key: checked value} of this master's options (the declared default where the
+        settings give none); OptionError names the key."""
+        values = {}
+        for option in cls.options:
+            try:
+                values[option.name] = option.check(getattr(settings, option.name,
+                                                           option.default))
+            except OptionError as err:
+                raise OptionError(f"[master].{option.name}: {err}") from None
+        cls.check_options(values)
+        return values
+
+    @classmethod
+    def check_options(cls, values: dict) -> None:
+        """Checks between options; a subclass raises OptionError naming the key."""
+
+    def option(self, name: str):
+        return self.values[name]
 
     # -- initialization -------------------------------------------------------------------
     def initialize(self, t0: float) -> None:
@@ -235,44 +173,18 @@ class Master:
 
     def gather(self, comp: str, coefficients: dict) -> np.ndarray:
         """Taylor rows of comp's inputs, from the rows of their sources."""
-        groups = self._groups[comp]
-        if len(groups) == 1:  # one source feeds every input: a column selection
-            src, _, indices = groups[0]
-            return coefficients[src].take(indices, axis=1)
-        depth = max((len(coefficients[src]) for src, _, _ in groups), default=1)
-        rows = np.zeros((depth, len(self.system.in_names[comp])))
-        for src, positions, indices in groups:
-            c = coefficients[src]
-            rows[:len(c), positions] = c.take(indices, axis=1)
-        return rows
+        return self.inputs.gather(comp, coefficients)
 
     def advance_component(self, comp: str, t: float, h: float, rows: np.ndarray) -> None:
         """Give comp its inputs as the polynomial `rows` over [t, t + h] and step it."""
         system = self.system
         if system.external_varies[comp]:  # constant external inputs were written at start
             system.set_external(comp, t)
-        write_derivatives = self._derivative_writer[comp]
-        if write_derivatives is not None:
-            system.write_inputs[comp](rows[0])
-            if len(rows) > 1 or self._derivatives_set[comp]:  # zeros once after a held step
-                write_derivatives(rows)
-                self._derivatives_set[comp] = len(rows) > 1
-            self.seen[comp] = (rows, h)
-        else:
-            if len(rows) > 1:
-                self._warn_foreign(comp)
-            value = evaluate(rows, 0.5 * h)
-            system.write_inputs[comp](value)
-            self.seen[comp] = (value[None, :], h)
+        seen = self.inputs.write(comp, rows)
+        if seen is None:  # a foreign FMU: the midpoint value, held
+            seen = self.inputs.write_held(comp, rows, h)
+        self.seen[comp] = (seen, h)
         system.fmus[comp].do_step(t, h)
-
-    def _warn_foreign(self, comp: str) -> None:
-        if comp not in self._warned_foreign:
-            self._warned_foreign.add(comp)
-            warnings.warn(f"{comp} ({self.system.fmus[comp].path.name}) has no input-derivative "
-                          f"inputs (<input>_d1, _d2): it gets the extrapolated inputs' midpoint "
-                          f"value, held over each step, so the order of accuracy drops to at most "
-                          f"2 at its inputs", RuntimeWarning, stacklevel=3)
 
     # -- the two sweeps -------------------------------------------------------------------
     def parallel_sweep(self, t: float, h: float, order: int) -> None:
@@ -284,46 +196,42 @@ class Master:
         for comp in system.order:
             system.refresh_outputs(comp)
 
-    def sequential_sweep(self, t: float, h: float, order: int) -> None:
+    def sequential_sweep(self, t: float, h: float, order: int, start_rows: dict | None = None
+                         ) -> None:
         """Gauss-Seidel: components step in order; a source that already reached t + h
-        contributes that newest point (interpolation), the others are extrapolated."""
+        contributes that newest point (interpolation), the others are extrapolated.
+        `start_rows`: the extrapolation rows already computed (comp -> rows), reused."""
         system = self.system
         coefficients = self.source_coefficients(t, order)
+        if start_rows:
+            coefficients.update(start_rows)
         for comp in system.order:
             self.advance_component(comp, t, h, self.gather(comp, coefficients))
             coefficients.reached(comp, t + h, system.refresh_outputs(comp))
 
     # -- rollback -------------------------------------------------------------------------
     def save_states(self) -> dict:
-        return {c: f.get_state() for c, f in self.system.fmus.items()}
+        return self.rollback.save()
 
     def restore_states(self, states: dict, comps=None) -> None:
-        for c in comps or states:
-            self.system.fmus[c].set_state(states[c])
+        self.rollback.restore(states, comps)
 
     def free_states(self, states: dict) -> None:
-        for c, s in states.items():
-            self.system.fmus[c].free_state(s)
+        self.rollback.free(states)
 
     # -- bookkeeping ----------------------------------------------------------------------
     def _remember(self, t: float) -> None:
         self.history.push(t, self.system.outputs)
         if self.uses_error_scale:
-            for c, v in self.system.outputs.items():
-                np.maximum(self.scale[c], np.abs(v), out=self.scale[c])
+            self.scales.update(self.system.outputs)
 
     def error_scale(self, comp: str, values: np.ndarray) -> np.ndarray:
         """What a tolerance is relative to: the largest magnitude the output has had so far,
         and at least its nominal (the FMU's `nominal` attribute, else 1 in its SI unit)."""
-        return np.maximum(np.maximum(self.scale[comp], np.abs(values)), self._nominal[comp])
+        return self.scales.of(comp, values)
 
     def check_finite(self, t: float) -> None:
-        for comp, values in self.system.outputs.items():
-            # in Python floats (cheaper than numpy for a few values): a NaN makes the sum NaN
-            if not sum(map(abs, values.tolist())) < RUNAWAY_LIMIT and not all(
-                    -RUNAWAY_LIMIT < x < RUNAWAY_LIMIT for x in values.tolist()):
-                k = int(np.argmax(~np.isfinite(values) | (np.abs(values) >= RUNAWAY_LIMIT)))
-                raise DivergenceError(t, comp, self.system.out_names[comp][k], float(values[k]))
+        check_finite(t, self.system.outputs, self.system.out_names)
 
     def statistics(self) -> dict:
         """Per FMU: doStep calls and seconds, rollbacks, state saves."""
@@ -335,45 +243,3 @@ class Master:
 
     def coupling_error(self) -> dict:
         return self.power.report()
-
-
-def _input_groups(system, comp: str) -> list[tuple[str, np.ndarray, np.ndarray]]:
-    """comp's inputs grouped by source: (source, input positions, source output indices)."""
-    groups: dict[str, tuple[list, list]] = {}
-    for pos, (src, k) in enumerate(system.in_sources[comp]):
-        groups.setdefault(src, ([], []))[0].append(pos)
-        groups[src][1].append(k)
-    return [(src, np.array(p), np.array(i)) for src, (p, i) in groups.items()]
-
-
-def _derivative_writer(system, comp: str):
-    """For comp's companion inputs X_d1..., X_d2... (crankfmu FMUs): a function writing them
-    from Taylor rows (derivatives the rows lack are 0), else None."""
-    fmu, names = system.fmus[comp], system.in_names[comp]
-    companions = [f"{n}_d1" for n in names] + [f"{n}_d2" for n in names]
-    if not names or not all(n in fmu.variables and fmu.variables[n].causality == "input"
-                            for n in companions):
-        return None
-    write = fmu.writer(companions)
-    padded = np.zeros((2, len(names)))  # d1, d2 for rows without a 2nd derivative (d2 = 0)
-    flat = padded.ravel()               # a view: the companions' order is d1..., d2...
-
-    def write_rows(rows: np.ndarray) -> None:
-        if len(rows) == 3:
-            write(rows[1:].ravel())
-        else:
-            padded[0] = rows[1] if len(rows) == 2 else 0.0
-            write(flat)
-    return write_rows
-
-
-def _nominal(fmu, name: str) -> float:
-    nominal = getattr(fmu.variables[name], "nominal", None)
-    try:
-        return abs(float(nominal)) if nominal else 1.0
-    except (TypeError, ValueError):
-        return 1.0
-
-
-def finite(x: float) -> bool:
-    return math.isfinite(x) and abs(x) < RUNAWAY_LIMIT
