@@ -262,7 +262,7 @@ def _check(status: int) -> None:
 
 
 def overhead_table(fmu: Path, folder: Path, n: int, repeats: int = 5) -> list[tuple]:
-    from crankfmu.cosim.masters import MASTERS
+    from crankfmu.masters import MASTERS
 
     step = 1e-3
     scene = noop_scene(fmu, folder, step, n * step)

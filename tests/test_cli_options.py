@@ -26,7 +26,7 @@ def _reads(source: str, dest: str) -> bool:
     """args.dest, or getattr(args, ...) with the name "dest" written in the same code (a loop
     over option names), or a master's declared option read by the loop over the declarations
     (cli._master_options_from)."""
-    from crankfmu.cosim.masters import all_options
+    from crankfmu.masters import all_options
     declared = dest.startswith("master_") and dest[len("master_"):] in all_options()
     return re.search(rf"args\.{dest}\b", source) is not None or \
         ("getattr(args, " in source and f'"{dest}"' in source) or \

@@ -1,7 +1,7 @@
 """The package's imports point one way (docs/architecture.md opens with the picture):
 
-    runtime <- models <- errors <- fmu <- system <- cosim <- reference, interop <- studies
-            <- commands, cli, api
+    runtime <- models <- errors <- fmu <- masters <- system <- cosim <- reference, interop
+            <- studies <- commands, cli, api
 
 A module may import its own layer or a lower one, never a higher one, and no set of modules
 imports itself round a cycle. Inside the bottom two: the runtime (bundled in every FMU) imports
@@ -16,7 +16,8 @@ from pathlib import Path
 import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "sources" / "crankfmu"
-LAYERS = (("runtime", "version"), ("models",), ("errors",), ("fmu",), ("system",), ("cosim",),
+LAYERS = (("runtime", "version"), ("models",), ("errors",), ("fmu",), ("masters",), ("system",),
+          ("cosim",),
           ("reference", "interop"), ("studies",), ("commands", "cli", "api", "__main__", ""))
 RANK = {top: rank for rank, tops in enumerate(LAYERS) for top in tops}
 

@@ -14,17 +14,18 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from crankfmu.cosim.masters import MASTERS, all_options, register
-from crankfmu.cosim.masters.history import History
-from crankfmu.cosim.masters.inputs import InputFeed
-from crankfmu.cosim.masters.options import Option, OptionError
-from crankfmu.cosim.masters.power import PortPower
-from crankfmu.cosim.masters.rollback import Rollback
-from crankfmu.cosim.masters.scale import DivergenceError, ErrorScale, check_finite
+from crankfmu.masters import MASTERS, all_options, register
+from crankfmu.masters.history import History
+from crankfmu.masters.inputs import InputFeed
+from crankfmu.masters.options import Option, OptionError
+from crankfmu.masters.power import PortPower
+from crankfmu.masters.rollback import Rollback
+from crankfmu.masters.scale import DivergenceError, ErrorScale, check_finite
 from crankfmu.system.load import load_scene
 from crankfmu.system.scene import SceneError
-from examples.masters.iterated_gauss_seidel import IteratedGaussSeidel
-from test_masters import STEPS, orders, rotor_fmus, run, scene_file, speed_error  # noqa: F401
+from tests.examples.masters.iterated_gauss_seidel import IteratedGaussSeidel
+from tests.test_masters import (OSCILLATOR, STEPS, orders, rotor_fmus, run,  # noqa: F401
+                                scene_file, speed_error)
 
 EXAMPLE = IteratedGaussSeidel.name
 
@@ -80,7 +81,7 @@ def test_example_master_options_are_checked_where_given(tmp_path, rotor_fmus, ex
     with pytest.raises(SceneError, match=r"\[master\].tolerance: not an option of the jacobi "
                                          r"master \(it is one of iterative, adaptive\)"):
         parse_scene("x.toml", scene({"algorithm": "jacobi", "tolerance": 1e-6}))
-    path = scene_file(tmp_path, {"algorithm": EXAMPLE}, __import__("test_masters").OSCILLATOR,
+    path = scene_file(tmp_path, {"algorithm": EXAMPLE}, OSCILLATOR,
                       0.05, None)
     out = tmp_path / "cli.csv"
     assert main(["run", str(path), "--fmus", str(rotor_fmus), "--out", str(out), "--sweeps",
@@ -98,7 +99,7 @@ def test_example_master_survives_an_ssp_round_trip(tmp_path, example_master):
     from crankfmu.system.ssp_load import _master
 
     scene = load_scene(scene_file(tmp_path, {"algorithm": EXAMPLE, "sweeps": 4},
-                                  __import__("test_masters").OSCILLATOR, 0.05, None))
+                                  OSCILLATOR, 0.05, None))
     node = scene_annotation(scene).find("{*}Master")
     assert dict(node.attrib) == {"algorithm": EXAMPLE, "step": "0.001", "sweeps": "4",
                                  "fmu_tolerance": "1e-08"}
@@ -156,7 +157,7 @@ def test_an_option_set_in_code_is_checked_when_the_run_starts(tmp_path, rotor_fm
     its own options before the first step and the runner names the key."""
     from crankfmu.cosim.runner import RunOptions, run_scene
     scene = load_scene(scene_file(tmp_path, {"algorithm": "adaptive"},
-                                  __import__("test_masters").OSCILLATOR, 0.05, None))
+                                  OSCILLATOR, 0.05, None))
     scene.master.tolerance = float("nan")
     with pytest.raises(SceneError, match=r"\[master\].tolerance: must be a finite number"):
         run_scene(scene, RunOptions(fmu_dir=rotor_fmus, progress=False))
@@ -240,8 +241,8 @@ def test_float_paths_give_numpys_floats():
     """The adaptive master's error and prediction run on Python floats (cheaper for a few
     values); they must give numpy's floats bit for bit (the scenes' results stay identical),
     and a NaN must come through as numpy's maximum and max let it."""
-    from crankfmu.cosim.masters.adaptive import _evaluate
-    from crankfmu.cosim.masters.history import evaluate
+    from crankfmu.masters.adaptive import _evaluate
+    from crankfmu.masters.history import evaluate
 
     rng = np.random.default_rng(3)
     for depth in (1, 2, 3):

@@ -31,7 +31,7 @@ def add_step_option(p: argparse.ArgumentParser, help: str = "communication step 
 def add_master_options(p: argparse.ArgumentParser) -> None:
     """How the master runs the scene (run, export-ssp)."""
     add_step_option(p)
-    from .cosim.masters import MASTERS, all_options
+    from .masters import MASTERS, all_options
     p.add_argument("--algorithm", choices=sorted(MASTERS),
                    help="master algorithm ([master].algorithm)")
     for option in all_options().values():  # each master's own options, from its declaration
@@ -107,7 +107,7 @@ def load_with_options(args):
 def _master_options_from(args, scene) -> None:
     """--extrapolation, --tolerance, ...: the options the masters declare, each checked
     against its declaration (a master that does not take one ignores it)."""
-    from .cosim.masters import all_options
+    from .masters import all_options
     from .system.scene import set_value
     for name in all_options():
         value = getattr(args, f"master_{name}", None)
@@ -124,7 +124,7 @@ def cmd_run(args) -> int:
                                          progress=False if args.no_progress else None,
                                          verbose_log=args.log))
     m = scene.master
-    from .cosim.masters import MASTERS
+    from .masters import MASTERS
     size = "variable steps" if MASTERS[m.algorithm].variable_step else f"steps of {m.step:g} s"
     own = ", ".join(f"{o.name} {getattr(m, o.name):g}" for o in MASTERS[m.algorithm].options)
     print(f"{scene.name}: {result.steps} {size} with {m.algorithm}" + (f" ({own})" if own else "")

@@ -33,4 +33,4 @@ class SceneError(CrankfmuError, ValueError):
 
 
 class OptionError(CrankfmuError, ValueError):
-    """A command-line option or API argument outside what it allows."""
+    """A command-line option, an API argument or a master option outside what it allows."""

@@ -124,7 +124,7 @@ def _printer():
 
 def _check_options(o) -> None:
     """Raises OptionError naming the option and what it allows."""
-    from ..cosim.masters import MASTERS
+    from ..masters import MASTERS
     from ..errors import OptionError
 
     unknown = [a for a in o.algorithms or [] if a not in MASTERS]

@@ -15,7 +15,7 @@ from lxml import etree
 from ..errors import CrankfmuError, InterruptedRun
 from ..system.scene import Scene, SceneError, check_run_size
 from ..fmu.instance import FmuInstance, LogCollector
-from .masters import DivergenceError, OptionError, make_master
+from ..masters import DivergenceError, OptionError, make_master
 from .results import (Recorder, column_units, normalize_unit, plot, versions, write_csv,
                       write_sidecar)
 from ..system.wiring import (System, check_components, check_links, check_loops, check_physics,

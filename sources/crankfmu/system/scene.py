@@ -5,7 +5,7 @@
                   tolerance, via fmi2SetupExperiment), max_steps (the most communication steps a
                   run may take; default crankfmu.errors.MAX_STEPS: a step that would need more is
                   refused up front), and the chosen algorithm's own options, as its master
-                  declares them (crankfmu.cosim.masters: extrapolation; tolerance,
+                  declares them (crankfmu.masters: extrapolation; tolerance,
                   max_iterations for iterative; tolerance, min_step [s], max_step [s] for
                   adaptive; `crankfmu run --help` lists them)
     [components.NAME]  fmu = "DcServoMotor" (built FMU name) or "path/to/file.fmu",
@@ -85,7 +85,7 @@ COMMON_MASTER_KEYS = ("algorithm", "step", "fmu_tolerance", "order", "max_steps"
 class Master:
     """The [master] table: the keys every master shares, and `options`, the values given for
     the masters' own options (extrapolation, tolerance, ...: declared by each master class in
-    crankfmu.cosim.masters). An option reads as an attribute (`m.tolerance`): the value given,
+    crankfmu.masters). An option reads as an attribute (`m.tolerance`): the value given,
     else the chosen master's declared default; setting one (`m.tolerance = 1e-4`) stores it
     unchecked (the master checks it when the run starts, the scene reader and `set_value` before)."""
     algorithm: str = "gauss-seidel"
@@ -117,7 +117,7 @@ class Master:
     def resolved(self) -> dict:
         """The common keys and the chosen master's options (given or default): what the run
         uses (the sidecar's "master" table, SSP export)."""
-        from ..cosim.masters import MASTERS
+        from ..masters import MASTERS
         cls = MASTERS.get(self.algorithm)
         own = {o.name: getattr(self, o.name) for o in (cls.options if cls else ())}
         return {"algorithm": self.algorithm, "step": self.step, **own,
@@ -130,9 +130,9 @@ class Master:
 
 def _master_options() -> dict:
     """Every option some master declares, by key. The one place the scene reader consults the
-    master registry (crankfmu.cosim.masters): which keys [master] takes depends on which
+    master registry (crankfmu.masters): which keys [master] takes depends on which
     masters exist."""
-    from ..cosim.masters import all_options
+    from ..masters import all_options
     return all_options()
 
 
@@ -234,7 +234,7 @@ def _variable_ref(path, key, value, components) -> str:
 
 def _parse_master(path, raw: dict) -> Master:
     """[master]: the common keys, then exactly the chosen master's own options."""
-    from ..cosim.masters import OptionError, master_class
+    from ..masters import OptionError, master_class
     m = Master()
     if "algorithm" in raw:
         try:
@@ -264,12 +264,12 @@ def _not_an_option(algorithm: str, key: str, own: dict) -> str:
 
 
 def _masters() -> dict:
-    from ..cosim.masters import MASTERS
+    from ..masters import MASTERS
     return MASTERS
 
 
 def _master_option(path, key: str, option, value):
-    from ..cosim.masters import OptionError
+    from ..masters import OptionError
     try:
         return option.check(value)
     except OptionError as err:
@@ -277,7 +277,7 @@ def _master_option(path, key: str, option, value):
 
 
 def _check_between_options(path, m: Master) -> None:
-    from ..cosim.masters import OptionError, master_class
+    from ..masters import OptionError, master_class
     cls = master_class(m.algorithm)
     try:
         cls.check_options({o.name: getattr(m, o.name) for o in cls.options})

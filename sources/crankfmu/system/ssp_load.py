@@ -397,7 +397,7 @@ def _float(path, node, attr: str) -> float:
 def _master(path, node) -> dict:
     if node is None:
         return {}
-    from ..cosim.masters import MASTERS, all_options
+    from ..masters import MASTERS, all_options
     options = all_options()
     float_keys = FLOAT_KEYS + tuple(n for n, o in options.items() if o.kind is float)
     int_keys = INT_KEYS + tuple(n for n, o in options.items() if o.kind is int)

@@ -7,14 +7,14 @@ linearly between its source's value at t and that source's output at t + h from 
 0 (global order 1). As the passes converge the inputs approach the trapezoidal coupling of the
 interface (global order 2 for a smooth system); each pass costs one doStep per FMU.
 
-Adding it is this file and one registration: in crankfmu/cosim/masters/__init__.py the line
-`IteratedGaussSeidel,` in MASTERS (the tests call `crankfmu.cosim.masters.register` instead, so
+Adding it is this file and one registration: in crankfmu/masters/__init__.py the line
+`IteratedGaussSeidel,` in MASTERS (the tests call `crankfmu.masters.register` instead, so
 the shipped list stays as it is).
 """
 from __future__ import annotations
 
-from crankfmu.cosim.masters.base import Master
-from crankfmu.cosim.masters.options import Option
+from crankfmu.masters.base import Master
+from crankfmu.masters.options import Option
 
 SWEEPS = Option("sweeps", int, "1", 2, "passes over each communication step (1: Gauss-Seidel "
                 "with held inputs)", minimum=1, maximum=50)

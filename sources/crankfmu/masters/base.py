@@ -2,12 +2,12 @@
 
 A master advances a wired `System` (FMUs, links, external inputs) over communication steps.
 A new master is one file with a `Master` subclass and one line in MASTERS
-(crankfmu/cosim/masters/__init__.py); README "Adding a master" walks through an example
+(crankfmu/masters/__init__.py); README "Adding a master" walks through an example
 (tests/examples/masters/halving.py). Implementers provide:
 
     name              the algorithm's name in scenes and on the command line (a key of MASTERS).
     options           the [master] keys it takes, a tuple of `Option` (name, type, unit, default,
-                      allowed range, help; crankfmu.cosim.masters.options). The scene, the
+                      allowed range, help; crankfmu.masters.options). The scene, the
                       command line, the Python API, SSP files and the sidecar read them from
                       here; the master reads the checked values with `self.option(name)`.
     _step(t, h)       advance every FMU from t; on return every FMU is at t + taken and

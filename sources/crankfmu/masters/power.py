@@ -84,7 +84,7 @@ class PortPower:
                           "relative_mismatch": abs(mismatch) / p.throughput if p.throughput
                           else None})
         rel = [q["relative_mismatch"] for q in ports if q["relative_mismatch"] is not None]
-        return {"definition": "port energy mismatch, see crankfmu.cosim.masters.power",
+        return {"definition": "port energy mismatch, see crankfmu.masters.power",
                 "max_relative_mismatch": max(rel) if rel else None, "ports": ports}
 
 

@@ -17,11 +17,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ...errors import CrankfmuError
-
-
-class OptionError(CrankfmuError, ValueError):
-    """A master option's value or key is not allowed; the caller adds the file and key."""
+from ..errors import OptionError  # noqa: F401 - a master option's value or key is not allowed
 
 
 @dataclass(frozen=True)
