@@ -60,6 +60,7 @@ class RunResult:
     coupling_error: dict = field(default_factory=dict)
     metadata: dict = field(default_factory=dict)  # the sidecar's content (also when not written)
     cpu_seconds: float = 0.0  # this process's CPU from initialization to the FMUs' release
+    estimate: object | None = None  # cosim.estimate.Estimate when RunOptions.estimate
 
 
 @dataclass
@@ -70,6 +71,9 @@ class RunOptions:
     progress: bool | None = None  # None: a bar when stderr is a terminal
     verbose_log: bool = False
     extra_sidecar: dict = field(default_factory=dict)
+    # estimate the run's global error from companion runs (cosim/estimate.py): the sidecar's
+    # "error_estimate"; off for the runs of studies, which compare against a reference
+    estimate: bool = False
 
 
 def load_fmus(scene: Scene, fmu_dir: Path, log: LogCollector) -> dict[str, FmuInstance]:
@@ -166,6 +170,9 @@ def run_scene(scene: Scene, options: RunOptions | None = None) -> RunResult:
     and raises RunError (RunInterrupted for Ctrl-C)."""
     options = options or RunOptions()
     check_run_size(scene)
+    if options.estimate:
+        from .estimate import with_metric_record
+        scene = with_metric_record(scene)
     out = Path(options.out) if options.out is not None else None
     log = LogCollector(echo=options.verbose_log)
     fmus = load_fmus(scene, options.fmu_dir or default_fmu_dir(scene), log)
@@ -184,7 +191,20 @@ def run_scene(scene: Scene, options: RunOptions | None = None) -> RunResult:
         close_fmus(fmus)
         raise
     with _Interrupt() as interrupt:
-        return _run(scene, options, out, log, fmus, system, master, recorder, readers, interrupt)
+        result = _run(scene, options, out, log, fmus, system, master, recorder, readers,
+                      interrupt)
+    if options.estimate:
+        _add_estimate(scene, options, result)
+    return result
+
+
+def _add_estimate(scene: Scene, options: RunOptions, result: RunResult) -> None:
+    """Run the companions, put the estimate in the result and its sidecar."""
+    from .estimate import estimate_run, recorder_series
+    result.estimate = estimate_run(scene, recorder_series(result.recorder), options.fmu_dir)
+    result.metadata["error_estimate"] = result.estimate.to_json()
+    if result.sidecar is not None:
+        write_sidecar(result.sidecar, result.metadata)
 
 
 def _run(scene, options, out, log, fmus, system, master, recorder, readers, interrupt):

@@ -5,7 +5,8 @@
                   internal relative tolerance, via fmi2SetupExperiment), tolerance (the iterative
                   and adaptive masters' own tolerance), max_iterations, min_step [s], max_step [s],
                   max_steps (the most communication steps a run may take; default
-                  crankfmu.errors.MAX_STEPS: a step that would need more is refused up front)
+                  crankfmu.errors.MAX_STEPS: a step that would need more is refused up front),
+                  target (a requested global error: `crankfmu run` chooses the setting)
     [components.NAME]  fmu = "DcServoMotor" (built FMU name) or "path/to/file.fmu",
                        parameters = {name = value}, effects = ["name", ...]
     [[connections]]    from = "comp.output", to = "comp.input"
@@ -89,6 +90,9 @@ class Master:
     min_step: float = 1e-6
     max_step: float = 1e-2
     max_steps: int = MAX_STEPS    # communication steps a run may take (checked before it starts)
+    # the requested global error (scene's accuracy metric): `crankfmu run` then chooses master,
+    # extrapolation and step from the error estimate (crankfmu.cosim.target); None: as given
+    target: float | None = None
 
 
 @dataclass
@@ -198,7 +202,7 @@ def _parse_master(path, raw: dict) -> Master:
     for key in ("step", "min_step", "max_step"):
         if key in raw:
             setattr(m, key, _number(path, f"[master].{key}", raw[key], positive=True))
-    for key in ("tolerance", "fmu_tolerance"):  # relative tolerances
+    for key in ("tolerance", "fmu_tolerance", "target"):  # relative tolerances and errors
         if key in raw:
             setattr(m, key, _number(path, f"[master].{key}", raw[key], positive=True,
                                     maximum=1.0))

@@ -10,8 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .events import EventError, EventSpec, event_error, event_errors, parse_event_specs
-from .metrics import (METRICS, Metric, MetricError, make_metric, observed_order, scene_event_specs,
+from ...cosim.events import EventError, EventSpec, event_error, event_errors, parse_event_specs
+from ...cosim.metrics import (METRICS, Metric, MetricError, make_metric, observed_order, scene_event_specs,
                       scene_metric_name, steady_figures)
 from .report import (format_orders, format_outcome, format_table, plot_work_precision,
                      write_table_csv)

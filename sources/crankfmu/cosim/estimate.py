@@ -1,0 +1,202 @@
+"""An estimate of a run's global error without a reference: Richardson extrapolation from
+companion runs at a coarser setting.
+
+The error is the scene's own accuracy metric (`cosim/metrics.py`: the trajectory metric or the
+event figures its [analysis] names), evaluated between the run and companion runs of the same
+master at another setting r x (step or tolerance). With a global error e(x) ~ C x^p, the
+difference between the run and its companion is d = |e(r x) - e(x)| ~ |r^p - 1| e(x), so
+
+    estimate = d / |r^p - 1|.
+
+Fixed-step masters: companions at 2h and 4h (STEP_RATIO); the order is observed from them,
+p = log2(d(2h, 4h) / d(h, 2h)), clamped to [ORDER_MIN, ORDER_MAX] (the design order
+extrapolation + 1 is off where Gauss-Seidel or the iterative master gain an order). Variable-step
+masters: one companion at 1/RATIO_TOLERANCE x the tolerance, p = 1 (error proportional to the
+tolerance); its error is small beside the run's, so the estimate is near d whatever p is (a
+coarser companion with p = 1 was off by up to 30x: the error is not a power of the tolerance).
+`scripts/error_estimate.py` measured these choices against the alternatives over the accuracy
+sweeps (README, "Error estimate").
+
+Cost: fixed step, 1/2 + 1/4 of the run's communication steps (0.75 x the run); variable step,
+the finer run (about 10^(1/(extrapolation + 1)) x the run's steps). When it is wrong: the
+companions count other events than the run (no estimate, the reason says so), a companion is
+unstable or stopped (no estimate), the run sits at the FMUs' tolerance floor (the difference is
+solver noise), or the coarse companions are outside the asymptotic range (unstable settings:
+the observed order, hence the estimate, is then off).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .metrics import Metric, MetricError, ReferenceSamples
+
+STEP_RATIO = 2.0          # companion step / run step
+RATIO_TOLERANCE = 10.0    # variable-step master: run tolerance / companion tolerance
+ORDER_MIN, ORDER_MAX = 0.5, 5.0  # clamp of the observed order (see module docstring)
+
+
+@dataclass
+class Estimate:
+    """The estimated global error of one run in the scene's metric; `error` is nan when there
+    is none, and `reason` says why."""
+    error: float = math.nan
+    order: float = math.nan         # p used in d / (r^p - 1)
+    order_source: str = ""          # "observed" (from the second companion) or "nominal"
+    ratio: float = STEP_RATIO
+    knob: str = "step"              # what the companions vary: "step" or "tolerance"
+    differences: list[float] = field(default_factory=list)  # d(run, c1), d(c1, c2) [1]
+    companion_seconds: float = 0.0  # wall time of the companion runs
+    reason: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return math.isfinite(self.error)
+
+    def to_json(self) -> dict:
+        def num(x):
+            return x if isinstance(x, (int, float)) and math.isfinite(x) else None
+        return {"estimated_error": num(self.error), "method": "richardson",
+                "order": num(self.order), "order_source": self.order_source,
+                "ratio": self.ratio, "knob": self.knob,
+                "differences": [num(d) for d in self.differences],
+                "companion_seconds": self.companion_seconds, "reason": self.reason}
+
+
+def nominal_order(extrapolation: int) -> float:
+    """The fixed-step masters' design order: extrapolation p gives global order p + 1."""
+    return float(extrapolation + 1)
+
+
+def difference(metric: Metric, fine: tuple, coarse: tuple) -> tuple[float, str]:
+    """(metric of `coarse` against `fine` as its reference, reason if none). Runs are
+    (times [s], {column: values}); the metric looks `fine` up at `coarse`'s record times (exact
+    grid points when the coarse grid is a subset of the fine one, as for steps h and 2h).
+    Infinite with the reason when the runs count different events."""
+    t_c, cols_c = coarse
+    t_f, cols_f = fine
+    ref = ReferenceSamples(np.asarray(t_f, dtype=float), cols_f)
+    try:
+        if metric.name == "events":
+            details = metric.event_details(np.asarray(t_c, dtype=float), cols_c, ref)
+            reasons = [d.reason for d in details if d.reason]
+            if reasons:
+                return math.inf, "event count differs between the run and its companion: " + \
+                    "; ".join(reasons)
+        return float(metric.error(np.asarray(t_c, dtype=float), cols_c, ref)), ""
+    except MetricError as err:
+        return math.nan, str(err)
+
+
+def richardson(metric: Metric, runs: list[tuple], ratio: float, knob: str,
+               nominal: float) -> Estimate:
+    """The estimate from `runs` = [run, companion 1, (companion 2)], each (times, columns), the
+    companions at ratio and ratio^2 x the run's step (knob "step") or tolerance ("tolerance").
+    With two companions the order is observed (clamped), else `nominal`."""
+    est = Estimate(ratio=ratio, knob=knob)
+    d1, why = difference(metric, runs[0], runs[1])
+    est.differences.append(d1)
+    if not math.isfinite(d1):
+        est.reason = why or "the companion run differs without bound"
+        return est
+    est.order, est.order_source = nominal, "nominal"
+    if len(runs) > 2:
+        d2, why2 = difference(metric, runs[1], runs[2])
+        est.differences.append(d2)
+        if math.isfinite(d2) and d1 > 0 and d2 > 0:
+            observed = math.log(d2 / d1) / math.log(ratio)
+            est.order = min(ORDER_MAX, max(ORDER_MIN, observed))
+            est.order_source = "observed"
+            if observed != est.order:
+                est.reason = f"observed order {observed:.2f} clamped to {est.order:g}"
+        elif why2:
+            est.reason = f"order not observed ({why2}); nominal order used"
+    est.error = d1 / abs(ratio ** est.order - 1.0)
+    return est
+
+
+def companion_knobs(algorithm_variable_step: bool, step: float, tolerance: float
+                    ) -> tuple[str, float, list[float]]:
+    """(knob, ratio, companion values) for a run at `step` and `tolerance`."""
+    if algorithm_variable_step:
+        return "tolerance", 1.0 / RATIO_TOLERANCE, [tolerance / RATIO_TOLERANCE]
+    return "step", STEP_RATIO, [step * STEP_RATIO, step * STEP_RATIO ** 2]
+
+
+# -- a run's estimate: the companions run here, in this process ------------------------------------
+def scene_metric(scene) -> Metric:
+    """The metric the scene is judged by ([analysis]; cosim/metrics.py), on its recorded
+    variables plus the event figures' variables."""
+    from .metrics import make_metric, scene_event_specs, scene_metric_name
+    specs = scene_event_specs(scene)
+    record = list(dict.fromkeys(scene.record + [v for s in specs for v in s.needs]))
+    return make_metric(scene_metric_name(scene), record, None, 1, specs)
+
+
+def with_metric_record(scene):
+    """`scene` (a copy if anything is added) recording what its metric needs."""
+    import copy
+    from .metrics import scene_event_specs
+    needs = [v for s in scene_event_specs(scene) for v in s.needs if v not in scene.record]
+    if not needs:
+        return scene
+    scene = copy.deepcopy(scene)
+    scene.record = scene.record + needs
+    return scene
+
+
+def recorder_series(recorder) -> tuple:
+    return recorder.rows[:, 0], {n: recorder.column(n) for n in recorder.names}
+
+
+def companion_scene(scene, knob: str, value: float):
+    import copy
+    trial = copy.deepcopy(scene)
+    setattr(trial.master, knob, value)
+    return trial
+
+
+def estimate_run(scene, run_series: tuple, fmu_dir=None) -> Estimate:
+    """Run the companions of `scene` (its master at 2h and 4h, or at a tenth of a
+    variable-step master's tolerance) and estimate the error of the run recorded in
+    `run_series` (times, columns)."""
+    import time
+
+    from .masters import MASTERS
+    from .metrics import MetricError
+    from .runner import RunError, RunOptions, run_scene
+    m = scene.master
+    variable = bool(getattr(MASTERS.get(m.algorithm), "variable_step", False))
+    knob, ratio, values = companion_knobs(variable, m.step, m.tolerance)
+    try:
+        metric = scene_metric(scene)
+    except MetricError as err:
+        return Estimate(ratio=ratio, knob=knob, reason=str(err))
+    series, seconds = [run_series], 0.0
+    for value in values:
+        t0 = time.perf_counter()
+        try:
+            result = run_scene(companion_scene(scene, knob, value),
+                               RunOptions(out=None, fmu_dir=fmu_dir, progress=False))
+        except RunError as err:
+            return Estimate(ratio=ratio, knob=knob, companion_seconds=seconds +
+                            time.perf_counter() - t0,
+                            reason=f"the companion run at {knob} {value:g} stopped: {err}")
+        seconds += time.perf_counter() - t0
+        series.append(recorder_series(result.recorder))
+    est = richardson(metric, series, ratio, knob, 1.0 if variable else
+                     nominal_order(m.extrapolation))
+    est.companion_seconds = seconds
+    return est
+
+
+def format_estimate(est: Estimate) -> str:
+    """One line for the terminal."""
+    if not est.ok:
+        return f"estimated error: none ({est.reason})"
+    return (f"estimated error {est.error:.2e} (Richardson, companions at "
+            f"{'2x and 4x the step' if est.knob == 'step' else 'a tenth of the tolerance'}, "
+            f"order {est.order:.2f} {est.order_source}; companions took "
+            f"{est.companion_seconds:.2f} s)" + (f"; {est.reason}" if est.reason else ""))
