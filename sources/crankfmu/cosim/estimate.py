@@ -9,8 +9,10 @@ difference between the run and its companion is d = |e(r x) - e(x)| ~ |r^p - 1| 
     estimate = d / |r^p - 1|.
 
 Fixed-step masters: companions at 2h and 4h (STEP_RATIO); the order is observed from them,
-p = log2(d(2h, 4h) / d(h, 2h)), clamped to [ORDER_MIN, ORDER_MAX] (the design order
-extrapolation + 1 is off where Gauss-Seidel or the iterative master gain an order). Variable-step
+p = log2(d(2h, 4h) / d(h, 2h)), clamped to [p0, p0 + 1], p0 = extrapolation + 1 the design
+order (Gauss-Seidel and the iterative master gain an order on some scenes; an observed ratio
+outside that range was noise in the measurement: grids of h and 2h meeting an event differently,
+errors at the FMUs' tolerance floor). Variable-step
 masters: one companion at 1/RATIO_TOLERANCE x the tolerance, p = 1 (error proportional to the
 tolerance); its error is small beside the run's, so the estimate is near d whatever p is (a
 coarser companion with p = 1 was off by up to 30x: the error is not a power of the tolerance).
@@ -70,6 +72,17 @@ def nominal_order(extrapolation: int) -> float:
     return float(extrapolation + 1)
 
 
+def order_rule(variable_step: bool, extrapolation: int) -> tuple[float, tuple | None]:
+    """(nominal order, bounds of the observed order) of crankfmu's estimator: fixed step, the
+    order observed from the companions within [p, p + 1], p = extrapolation + 1 (Gauss-Seidel
+    and the iterative master gain an order on some scenes; outside that range the observed
+    ratio was noise: scripts/error_estimate.py); variable step, p = 1."""
+    if variable_step:
+        return 1.0, None
+    p = nominal_order(extrapolation)
+    return p, (p, p + 1.0)
+
+
 def difference(metric: Metric, fine: tuple, coarse: tuple) -> tuple[float, str]:
     """(metric of `coarse` against `fine` as its reference, reason if none). Runs are
     (times [s], {column: values}); the metric looks `fine` up at `coarse`'s record times (exact
@@ -91,10 +104,12 @@ def difference(metric: Metric, fine: tuple, coarse: tuple) -> tuple[float, str]:
 
 
 def richardson(metric: Metric, runs: list[tuple], ratio: float, knob: str,
-               nominal: float) -> Estimate:
+               nominal: float, bounds: tuple[float, float] | None = None) -> Estimate:
     """The estimate from `runs` = [run, companion 1, (companion 2)], each (times, columns), the
     companions at ratio and ratio^2 x the run's step (knob "step") or tolerance ("tolerance").
-    With two companions the order is observed (clamped), else `nominal`."""
+    With two companions the order is observed, clamped to `bounds` (default
+    [ORDER_MIN, ORDER_MAX]), else `nominal`."""
+    lo, hi = bounds or (ORDER_MIN, ORDER_MAX)
     est = Estimate(ratio=ratio, knob=knob)
     d1, why = difference(metric, runs[0], runs[1])
     est.differences.append(d1)
@@ -107,9 +122,9 @@ def richardson(metric: Metric, runs: list[tuple], ratio: float, knob: str,
         est.differences.append(d2)
         if math.isfinite(d2) and d1 > 0 and d2 > 0:
             observed = math.log(d2 / d1) / math.log(ratio)
-            est.order = min(ORDER_MAX, max(ORDER_MIN, observed))
+            est.order = min(hi, max(lo, observed))
             est.order_source = "observed"
-            if observed != est.order:
+            if abs(observed - est.order) > 0.25:  # not the noise of an order at its bound
                 est.reason = f"observed order {observed:.2f} clamped to {est.order:g}"
         elif why2:
             est.reason = f"order not observed ({why2}); nominal order used"
@@ -186,8 +201,7 @@ def estimate_run(scene, run_series: tuple, fmu_dir=None) -> Estimate:
                             reason=f"the companion run at {knob} {value:g} stopped: {err}")
         seconds += time.perf_counter() - t0
         series.append(recorder_series(result.recorder))
-    est = richardson(metric, series, ratio, knob, 1.0 if variable else
-                     nominal_order(m.extrapolation))
+    est = richardson(metric, series, ratio, knob, *order_rule(variable, m.extrapolation))
     est.companion_seconds = seconds
     return est
 

@@ -17,11 +17,13 @@ step grid), or the step would fall below MIN_STEP_FACTOR x the scene's step; it 
 from __future__ import annotations
 
 import copy
+
+from ..errors import CrankfmuError
 import math
 import time
 from dataclasses import dataclass, field
 
-from .estimate import (Estimate, companion_knobs, nominal_order, recorder_series, richardson,
+from .estimate import (Estimate, companion_knobs, order_rule, recorder_series, richardson,
                        scene_metric, with_metric_record)
 
 START_FACTOR = 32.0      # the ladder's first step, x the scene's step (accuracy_tables: no master
@@ -31,7 +33,7 @@ SAFETY = 0.5             # aim the estimate at this fraction of the target
 MAX_TOLERANCE_TRIES = 6  # variable-step master: tolerance updates
 
 
-class TargetNotMet(Exception):
+class TargetNotMet(CrankfmuError):
     """No setting met the target; the message says what was tried and why it failed."""
 
 
@@ -141,7 +143,7 @@ def _step_ladder(scene, algorithm, extrapolation, target, fmu_dir, report):
         count += 1
         if len(rungs) >= 3:
             est = richardson(metric, [r[1] for r in rungs[-1:-4:-1]], 2.0, "step",
-                             nominal_order(extrapolation))
+                             *order_rule(False, extrapolation))
             if not est.ok:
                 if count >= 5:  # finer rungs did not settle it (events keep differing)
                     report.reasons.append(f"{label}: no estimate at step {h:g} s: {est.reason}")

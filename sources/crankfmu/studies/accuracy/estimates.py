@@ -12,7 +12,7 @@ import math
 from dataclasses import replace
 from pathlib import Path
 
-from ...cosim.estimate import companion_knobs, nominal_order, richardson
+from ...cosim.estimate import companion_knobs, order_rule, richardson
 from .sweep import Outcome, Setting, is_variable_step
 
 
@@ -56,8 +56,7 @@ def add_estimates(outcomes: list[Outcome], metric, runs_dir: Path) -> None:
             continue
         variable = is_variable_step(s.algorithm)
         knob, ratio, _ = companion_knobs(variable, s.step, s.tolerance)
-        est = richardson(metric, series, ratio, knob,
-                         1.0 if variable else nominal_order(s.extrapolation))
+        est = richardson(metric, series, ratio, knob, *order_rule(variable, s.extrapolation))
         o.extra["estimated_error"] = est.error if est.ok else None
         if not est.ok:
             o.extra["estimate_reason"] = est.reason
