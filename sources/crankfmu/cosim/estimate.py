@@ -140,7 +140,7 @@ def companion_knobs(algorithm_variable_step: bool, step: float, tolerance: float
     return "step", STEP_RATIO, [step * STEP_RATIO, step * STEP_RATIO ** 2]
 
 
-# -- a run's estimate: the companions run here, in this process ------------------------------------
+# -- helpers of a run's estimate (the companions are run by cosim.runner.estimate_run) ---------
 def scene_metric(scene) -> Metric:
     """The metric the scene is judged by ([analysis]; cosim/metrics.py), on its recorded
     variables plus the event figures' variables."""
@@ -171,39 +171,6 @@ def companion_scene(scene, knob: str, value: float):
     trial = copy.deepcopy(scene)
     setattr(trial.master, knob, value)
     return trial
-
-
-def estimate_run(scene, run_series: tuple, fmu_dir=None) -> Estimate:
-    """Run the companions of `scene` (its master at 2h and 4h, or at a tenth of a
-    variable-step master's tolerance) and estimate the error of the run recorded in
-    `run_series` (times, columns)."""
-    import time
-
-    from .masters import MASTERS
-    from .metrics import MetricError
-    from .runner import RunError, RunOptions, run_scene
-    m = scene.master
-    variable = bool(getattr(MASTERS.get(m.algorithm), "variable_step", False))
-    knob, ratio, values = companion_knobs(variable, m.step, m.tolerance)
-    try:
-        metric = scene_metric(scene)
-    except MetricError as err:
-        return Estimate(ratio=ratio, knob=knob, reason=str(err))
-    series, seconds = [run_series], 0.0
-    for value in values:
-        t0 = time.perf_counter()
-        try:
-            result = run_scene(companion_scene(scene, knob, value),
-                               RunOptions(out=None, fmu_dir=fmu_dir, progress=False))
-        except RunError as err:
-            return Estimate(ratio=ratio, knob=knob, companion_seconds=seconds +
-                            time.perf_counter() - t0,
-                            reason=f"the companion run at {knob} {value:g} stopped: {err}")
-        seconds += time.perf_counter() - t0
-        series.append(recorder_series(result.recorder))
-    est = richardson(metric, series, ratio, knob, *order_rule(variable, m.extrapolation))
-    est.companion_seconds = seconds
-    return est
 
 
 def format_estimate(est: Estimate) -> str:

@@ -15,7 +15,7 @@ from lxml import etree
 from ..errors import CrankfmuError, InterruptedRun
 from ..system.scene import Scene, SceneError, check_run_size
 from ..fmu.instance import FmuInstance, LogCollector
-from .masters import DivergenceError, make_master
+from .masters import MASTERS, DivergenceError, make_master
 from .results import (Recorder, column_units, normalize_unit, plot, versions, write_csv,
                       write_sidecar)
 from ..system.wiring import (System, check_components, check_links, check_loops, check_physics,
@@ -200,7 +200,7 @@ def run_scene(scene: Scene, options: RunOptions | None = None) -> RunResult:
 
 def _add_estimate(scene: Scene, options: RunOptions, result: RunResult) -> None:
     """Run the companions, put the estimate in the result and its sidecar."""
-    from .estimate import estimate_run, recorder_series
+    from .estimate import recorder_series
     result.estimate = estimate_run(scene, recorder_series(result.recorder), options.fmu_dir)
     result.metadata["error_estimate"] = result.estimate.to_json()
     if result.sidecar is not None:
@@ -272,6 +272,37 @@ def _run(scene, options, out, log, fmus, system, master, recorder, readers, inte
              plot_roles(scene), reference)
     return RunResult(out, sidecar, png, recorder, statistics, wall, step,
                      master.master_statistics(), master.coupling_error(), metadata, cpu)
+
+
+def estimate_run(scene, run_series: tuple, fmu_dir=None):
+    """Run the companions of `scene` (its master at 2h and 4h, or at a tenth of a
+    variable-step master's tolerance) and estimate the error of the run recorded in
+    `run_series` (times, columns)."""
+    from .estimate import (Estimate, companion_knobs, companion_scene, order_rule,
+                           recorder_series, richardson, scene_metric)
+    from .metrics import MetricError
+    m = scene.master
+    variable = bool(getattr(MASTERS.get(m.algorithm), "variable_step", False))
+    knob, ratio, values = companion_knobs(variable, m.step, m.tolerance)
+    try:
+        metric = scene_metric(scene)
+    except MetricError as err:
+        return Estimate(ratio=ratio, knob=knob, reason=str(err))
+    series, seconds = [run_series], 0.0
+    for value in values:
+        t0 = time.perf_counter()
+        try:
+            result = run_scene(companion_scene(scene, knob, value),
+                               RunOptions(out=None, fmu_dir=fmu_dir, progress=False))
+        except RunError as err:
+            return Estimate(ratio=ratio, knob=knob, companion_seconds=seconds +
+                            time.perf_counter() - t0,
+                            reason=f"the companion run at {knob} {value:g} stopped: {err}")
+        seconds += time.perf_counter() - t0
+        series.append(recorder_series(result.recorder))
+    est = richardson(metric, series, ratio, knob, *order_rule(variable, m.extrapolation))
+    est.companion_seconds = seconds
+    return est
 
 
 def plot_roles(scene: Scene) -> dict | None:

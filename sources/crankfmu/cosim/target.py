@@ -169,7 +169,7 @@ def _step_ladder(scene, algorithm, extrapolation, target, fmu_dir, report):
 
 def _tolerance_walk(scene, algorithm, extrapolation, target, fmu_dir, report):
     """A variable-step master: tolerance from the target, tightened by the estimate's ratio."""
-    from .estimate import estimate_run
+    from .runner import estimate_run
     label = f"{algorithm}, extrapolation {extrapolation}"
     tol = target
     for _ in range(MAX_TOLERANCE_TRIES):

@@ -96,7 +96,7 @@ def run_accuracy(scene, options: AccuracyOptions) -> AccuracyResult:
         outcomes = run_settings(scene, settings + companions, metric, ref, options.fmu_dir,
                                 out / "runs",
                                 executor, options.progress, f"{scene.name} accuracy sweep",
-                                options.report,
+                                _rows_only(options.report, set(companions)),
                                 resume_key(ref_key, metric) if options.resume else None)
     finally:
         if options.executor is None:
@@ -130,6 +130,13 @@ def _reference(scene, settings, metric: Metric, out: Path, options: AccuracyOpti
                                                options.reference_rtol, options.progress)
     key = json.loads(csv.with_suffix(".json").read_text()).get("cache_key", "")
     return ref, csv, cached, key
+
+
+def _rows_only(report, companions: set):
+    """`report` called for the table's runs only (the companions are not rows)."""
+    if report is None or not companions:
+        return report
+    return lambda outcome, kept: None if outcome.setting in companions else report(outcome, kept)
 
 
 def _excluded_by_default(setting: Setting) -> bool:
