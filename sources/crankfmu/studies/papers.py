@@ -364,7 +364,7 @@ def impact_data(scene) -> dict:
     for var in ("P", "T", "c_contact_used", "c_support_used"):
         if f"{comp}.{var}" not in sc.record:
             raise SceneError(sc.path, "record.variables", f"the figure needs {comp}.{var}")
-    v = api.simulate(sc).values
+    v = api.simulate(sc, estimate=False).values
     c, c0 = float(v[f"{comp}.c_contact_used"][0]), float(v[f"{comp}.c_support_used"][0])
     params = sc.components[comp].parameters
     data = ra.RockerData(**{k: float(params[k]) for k in ("J", "m", "r", "S", "R_c", "d", "E",
@@ -611,7 +611,7 @@ def planetary_data(scene_path) -> dict:
     four = api.prepare(scene, stop_time=T_STOP)
     four.inputs["drive.command"] = InputSignal("drive.command", [0.0, T_COMMAND_ON,
                                                T_COMMAND_OFF], [0.0, 1.0, 0.0], "step")
-    v = api.simulate(four).values
+    v = api.simulate(four, estimate=False).values
     t = v["time"]
     k_off = int(np.argmin(np.abs(t - T_COMMAND_OFF)))
     engage = planetary_closed_form(d, c0, c1, "engage", w_idle, 0.0, T_COMMAND_OFF - T_COMMAND_ON)
@@ -622,14 +622,14 @@ def planetary_data(scene_path) -> dict:
     for a in PLANETARY_ALPHAS:
         t_cf = planetary_engagement_time({**d, "alpha_b": a}, c0, c1, w_idle)
         r = api.simulate(scene, stop_time=t_cf + 0.01, step=SWEEP_STEP,
-                         parameters={"drive.alpha_b": a}).values
+                         parameters={"drive.alpha_b": a}, estimate=False).values
         sims[a] = float(r["drive.t_lock_b"][-1])
     targets = np.linspace(0.15, 0.45, 13)
     Mp_check = [brake_torque_for_engagement_time(d, c0, c1, w_idle, x) for x in PLANETARY_TARGETS]
     t_check = []
     for Mp, x in zip(Mp_check, PLANETARY_TARGETS):
         r = api.simulate(scene, stop_time=x + 0.01, step=SWEEP_STEP,
-                         parameters={"drive.Mp_b": Mp}).values
+                         parameters={"drive.Mp_b": Mp}, estimate=False).values
         t_check.append(float(r["drive.t_lock_b"][-1]))
     return {"sim": {k: v[k] for k in ("time", "drive.w_a", "drive.w_b", "drive.w_h",
                                       "drive.E_brake_b", "drive.E_brake_h", "drive.period",
