@@ -1,11 +1,13 @@
 """`crankfmu run SCENE --target TOL`: choose master, extrapolation and step for a requested
 global error without a reference, from the error estimate (cosim/estimate.py).
 
-Fixed-step masters walk a ladder of steps h0, h0/2, h0/4, ... from a coarse start (the scene's
-step x START_FACTOR): each rung is the companion of the next two, so the estimate of a rung
-(Richardson with the order observed from the two rungs above) costs no extra run. The ladder
-goes down one halving at a time (a skipped rung would have to run anyway as the companion of
-the next) and stops at the first rung whose estimate meets target x SAFETY. The whole ladder costs about 2x its last rung (a geometric sum).
+Fixed-step masters: two runs at a coarse step h0 = the scene's step x START_FACTOR and h0/2
+give a first estimate (the design order p0 = extrapolation + 1); the step that would meet
+target x SAFETY is predicted from it and run (as h / 2^k, so record grids stay nested); every
+run is the companion of the next, and from the third run on the estimate of the newest run
+uses the order observed from the last three (cosim.estimate.richardson_steps, any step
+ratios). The search stops at the first run whose estimate meets the target: typically three
+runs, two of them coarse. No run is repeated: the accepted run is written as it ran.
 Candidates, in order: the scene's master with extrapolation 2, then Gauss-Seidel with
 extrapolation 2 and 1 (the next is tried when one cannot meet the target). A variable-step
 master in the scene is searched over its tolerance instead (companion at a tenth of it).
@@ -17,20 +19,23 @@ step grid), or the step would fall below MIN_STEP_FACTOR x the scene's step; it 
 from __future__ import annotations
 
 import copy
-
-from ..errors import CrankfmuError
 import math
 import time
 from dataclasses import dataclass, field
 
-from .estimate import (Estimate, companion_knobs, order_rule, recorder_series, richardson,
-                       scene_metric, with_metric_record)
+from ..errors import CrankfmuError
+
+from .estimate import (Estimate, companion_knobs, order_rule, recorder_series,
+                       richardson_steps, scene_metric, with_metric_record)
 
 START_FACTOR = 32.0      # the ladder's first step, x the scene's step (accuracy_tables: no master
                          # became unstable on the hybrid scenes within 32 x)
 MIN_STEP_FACTOR = 1 / 64  # the finest step tried, x the scene's step
 SAFETY = 0.5             # aim the estimate at this fraction of the target
 MAX_TOLERANCE_TRIES = 6  # variable-step master: tolerance updates
+MAX_STEP_RUNS = 8        # fixed-step master: runs per candidate
+MAX_HALVINGS = 4         # the largest jump of the step at once: / 2^4
+MIN_START_STEPS = 16     # the coarse start takes at least this many steps
 
 
 class TargetNotMet(CrankfmuError):
@@ -123,48 +128,61 @@ def _run(trial, fmu_dir, report):
 
 
 def _step_ladder(scene, algorithm, extrapolation, target, fmu_dir, report):
-    """The ladder of steps (module docstring); (result, estimate, trial) or None."""
+    """The step search (module docstring); (result, estimate, trial) or None."""
     metric = scene_metric(scene)
     label = f"{algorithm}, extrapolation {extrapolation}"
+    nominal, bounds = order_rule(False, extrapolation)
     h_min = scene.master.step * MIN_STEP_FACTOR
-    h = scene.master.step * START_FACTOR
-    rungs = []  # (step, series, result)
-    last_estimate, count = math.inf, 0
-    while h >= h_min * (1 - 1e-9):
-        trial = _trial(scene, algorithm, extrapolation, step=h)
-        result, why = _run(trial, fmu_dir, report)
+    # at least MIN_START_STEPS steps over the run: a step longer than the run is no step
+    h = min(scene.master.step * START_FACTOR,
+            (scene.stop_time - scene.start_time) / MIN_START_STEPS)
+    runs, last_error = [], math.inf  # (step, series, result)
+    while len(runs) < MAX_STEP_RUNS:
+        if h < h_min * (1 - 1e-9):
+            report.reasons.append(f"{label}: the step would fall below {h_min:g} s "
+                                  f"({MIN_STEP_FACTOR:g} x the scene's step)")
+            return None
+        result, why = _run(_trial(scene, algorithm, extrapolation, step=h), fmu_dir, report)
         if result is None:
-            if rungs:  # a finer step stopped after coarser ones ran: not a coarse instability
+            if runs:  # a finer step stopped after coarser ones ran: not a coarse instability
                 report.reasons.append(f"{label}: the run at step {h:g} s stopped: {why}")
                 return None
             h /= 2.0  # a coarse start that is unstable: start finer
             continue
-        rungs.append((h, recorder_series(result.recorder), result))
-        count += 1
-        if len(rungs) >= 3:
-            est = richardson(metric, [r[1] for r in rungs[-1:-4:-1]], 2.0, "step",
-                             *order_rule(False, extrapolation))
-            if not est.ok:
-                if count >= 5:  # finer rungs did not settle it (events keep differing)
-                    report.reasons.append(f"{label}: no estimate at step {h:g} s: {est.reason}")
-                    return None
-            elif est.error <= target * SAFETY or (est.error <= target and h <= h_min * 1.5):
-                return result, est, trial
-            elif est.error >= last_estimate * 0.8 and count >= 4:
-                report.reasons.append(
-                    f"{label}: the estimate stopped falling with the step ({last_estimate:.2e} "
-                    f"at {2 * h:g} s, {est.error:.2e} at {h:g} s): the FMUs' tolerance floor "
-                    f"or an input sampled off the step grid limits the error")
+        runs.append((h, recorder_series(result.recorder), result))
+        if len(runs) < 2:
+            h /= 2.0
+            continue
+        est = richardson_steps(metric, [(r[0], r[1]) for r in runs[-3:]], nominal, bounds)
+        if not est.ok:  # events differ between the last two: halve and look again
+            if len(runs) >= 5:
+                report.reasons.append(f"{label}: no estimate at step {h:g} s: {est.reason}")
                 return None
-            else:
-                last_estimate = est.error
-                rungs = rungs[-2:]  # the next rung's companions
-            if not est.ok:
-                rungs = rungs[-2:]
-        h = rungs[-1][0] / 2.0
-    report.reasons.append(f"{label}: the step would fall below {h_min:g} s "
-                          f"({MIN_STEP_FACTOR:g} x the scene's step)")
+            runs, h = runs[-1:], h / 2.0
+            continue
+        if len(runs) >= 3 and est.error <= target:
+            # accepted: the order was observed; the sidecar gets this estimate
+            return result, est, _trial(scene, algorithm, extrapolation, step=h)
+        if len(runs) >= 4 and est.error >= 0.8 * last_error:
+            report.reasons.append(
+                f"{label}: the estimate stopped falling with the step ({last_error:.2e}, then "
+                f"{est.error:.2e} at {h:g} s): the FMUs' tolerance floor or an input sampled "
+                f"off the step grid limits the error")
+            return None
+        last_error = est.error
+        h = _next_step(h, est, target)
+    report.reasons.append(f"{label}: {MAX_STEP_RUNS} runs without meeting the target")
     return None
+
+
+def _next_step(h: float, est: Estimate, target: float) -> float:
+    """The step predicted to meet target x SAFETY, as h / 2^k (k = 1..MAX_HALVINGS): record
+    grids stay nested, so runs are compared at common points without interpolation."""
+    if est.error <= 0:  # the runs agree exactly: halve, the next run observes the order
+        return h / 2.0
+    wanted = h * (SAFETY * target / est.error) ** (1.0 / est.order)
+    k = math.ceil(math.log2(h / wanted) - 1e-9) if wanted < h else 1
+    return h / 2.0 ** min(MAX_HALVINGS, max(1, k))
 
 
 def _tolerance_walk(scene, algorithm, extrapolation, target, fmu_dir, report):
