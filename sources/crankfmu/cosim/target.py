@@ -2,12 +2,15 @@
 global error without a reference, from the error estimate (cosim/estimate.py).
 
 Fixed-step masters: two runs at a coarse step h0 = the scene's step x START_FACTOR and h0/2
-give a first estimate (the design order p0 = extrapolation + 1); the step that would meet
-target x SAFETY is predicted from it and run (as h / 2^k, so record grids stay nested); every
-run is the companion of the next, and from the third run on the estimate of the newest run
-uses the order observed from the last three (cosim.estimate.richardson_steps, any step
-ratios). The search stops at the first run whose estimate meets the target: typically three
-runs, two of them coarse. No run is repeated: the accepted run is written as it ran.
+give a first estimate (the design order p0 = extrapolation + 1); the step h that would meet
+target x SAFETY is predicted from it (as h0 / 2^k, so every step is a rung of one ladder) and
+run with its companions 2h and 4h (those not run yet); the run's estimate is then exactly the
+one `crankfmu run` reports (cosim.estimate.richardson: order observed within [p0, p0 + 1]).
+The search stops at the first run whose estimate meets the target, else predicts again from
+it. Typically three runs (two of them coarse) when the prediction lands two halvings below the
+start, five when it jumps further. No run is repeated: the accepted run is written as it ran.
+(An estimate from the jump itself, h0/2 to h0/32, trusted the coarse runs' order: on the servo
+press it was 70x too low.)
 Candidates, in order: the scene's master with extrapolation 2, then Gauss-Seidel with
 extrapolation 2 and 1 (the next is tried when one cannot meet the target). A variable-step
 master in the scene is searched over its tolerance instead (companion at a tenth of it).
@@ -25,11 +28,12 @@ from dataclasses import dataclass, field
 
 from ..errors import CrankfmuError
 
-from .estimate import (Estimate, companion_knobs, order_rule, recorder_series,
+from .estimate import (Estimate, companion_knobs, order_rule, recorder_series, richardson,
                        richardson_steps, scene_metric, with_metric_record)
 
-START_FACTOR = 32.0      # the ladder's first step, x the scene's step (accuracy_tables: no master
-                         # became unstable on the hybrid scenes within 32 x)
+START_FACTOR = 128.0     # the first step, x the scene's step: coarse runs are cheap where the
+                         # cost follows the step; an unstable start costs a run (measured
+                         # against 32 in benchmarks/target.py: fewer runs on most scenes)
 MIN_STEP_FACTOR = 1 / 64  # the finest step tried, x the scene's step
 SAFETY = 0.5             # aim the estimate at this fraction of the target
 MAX_TOLERANCE_TRIES = 6  # variable-step master: tolerance updates
@@ -128,61 +132,80 @@ def _run(trial, fmu_dir, report):
 
 
 def _step_ladder(scene, algorithm, extrapolation, target, fmu_dir, report):
-    """The step search (module docstring); (result, estimate, trial) or None."""
+    """The step search (module docstring); (result, estimate, trial) or None. Steps are
+    h0 / 2^k; `rungs` maps k to the run's (series, result)."""
     metric = scene_metric(scene)
     label = f"{algorithm}, extrapolation {extrapolation}"
     nominal, bounds = order_rule(False, extrapolation)
     h_min = scene.master.step * MIN_STEP_FACTOR
     # at least MIN_START_STEPS steps over the run: a step longer than the run is no step
-    h = min(scene.master.step * START_FACTOR,
-            (scene.stop_time - scene.start_time) / MIN_START_STEPS)
-    runs, last_error = [], math.inf  # (step, series, result)
-    while len(runs) < MAX_STEP_RUNS:
-        if h < h_min * (1 - 1e-9):
-            report.reasons.append(f"{label}: the step would fall below {h_min:g} s "
-                                  f"({MIN_STEP_FACTOR:g} x the scene's step)")
-            return None
-        result, why = _run(_trial(scene, algorithm, extrapolation, step=h), fmu_dir, report)
-        if result is None:
-            if runs:  # a finer step stopped after coarser ones ran: not a coarse instability
-                report.reasons.append(f"{label}: the run at step {h:g} s stopped: {why}")
-                return None
-            h /= 2.0  # a coarse start that is unstable: start finer
+    # (a power of 2 x the scene's step, so the steps tried are those of the accuracy sweep)
+    h0 = scene.master.step * START_FACTOR
+    while h0 > scene.master.step and h0 > (scene.stop_time - scene.start_time) / MIN_START_STEPS:
+        h0 /= 2.0
+    rungs: dict[int, tuple] = {}
+    k0 = 0  # the coarsest rung that ran (a coarse start that stops moves it down)
+    while len(rungs) < 2:  # two coarse runs: a first estimate with the design order
+        k = k0 + len(rungs)
+        if h0 / 2 ** k < h_min:
+            return _fail(report, f"{label}: the step would fall below {h_min:g} s")
+        ran = _rung(scene, algorithm, extrapolation, h0 / 2 ** k, fmu_dir, report)
+        if isinstance(ran, str):
+            if rungs:
+                return _fail(report, f"{label}: {ran}")
+            k0 += 1
             continue
-        runs.append((h, recorder_series(result.recorder), result))
-        if len(runs) < 2:
-            h /= 2.0
-            continue
-        est = richardson_steps(metric, [(r[0], r[1]) for r in runs[-3:]], nominal, bounds)
-        if not est.ok:  # events differ between the last two: halve and look again
-            if len(runs) >= 5:
-                report.reasons.append(f"{label}: no estimate at step {h:g} s: {est.reason}")
-                return None
-            runs, h = runs[-1:], h / 2.0
-            continue
-        if len(runs) >= 3 and est.error <= target:
-            # accepted: the order was observed; the sidecar gets this estimate
-            return result, est, _trial(scene, algorithm, extrapolation, step=h)
-        if len(runs) >= 4 and est.error >= 0.8 * last_error:
-            report.reasons.append(
-                f"{label}: the estimate stopped falling with the step ({last_error:.2e}, then "
-                f"{est.error:.2e} at {h:g} s): the FMUs' tolerance floor or an input sampled "
-                f"off the step grid limits the error")
-            return None
-        last_error = est.error
-        h = _next_step(h, est, target)
-    report.reasons.append(f"{label}: {MAX_STEP_RUNS} runs without meeting the target")
+        rungs[k] = ran
+    est = richardson_steps(metric, [(h0 / 2 ** k, rungs[k][0]) for k in sorted(rungs)], nominal)
+    k_run, last_error = k0 + 1, math.inf
+    for _ in range(MAX_STEP_RUNS):
+        # the next run: the step predicted to meet target x SAFETY, at least two halvings
+        # below the coarsest rung, so that its companions (2h, 4h) are rungs too
+        k_new = max(k0 + 2, k_run + _halvings(est, target) if est.ok else k_run + 1)
+        if h0 / 2 ** k_new < h_min * (1 - 1e-9):
+            return _fail(report, f"{label}: the step would fall below {h_min:g} s "
+                                 f"({MIN_STEP_FACTOR:g} x the scene's step)")
+        for k in (k_new - 2, k_new - 1, k_new):  # its companions first, then the run
+            if k not in rungs:
+                ran = _rung(scene, algorithm, extrapolation, h0 / 2 ** k, fmu_dir, report)
+                if isinstance(ran, str):
+                    return _fail(report, f"{label}: {ran}")
+                rungs[k] = ran
+        k_run = k_new
+        est = richardson(metric, [rungs[k][0] for k in (k_new, k_new - 1, k_new - 2)], 2.0,
+                         "step", nominal, bounds)  # the estimator of `crankfmu run`
+        h = h0 / 2 ** k_new
+        if est.ok and est.error <= target:
+            return rungs[k_new][1], est, _trial(scene, algorithm, extrapolation, step=h)
+        if est.ok and est.error >= 0.8 * last_error:
+            return _fail(report, f"{label}: the estimate stopped falling with the step "
+                                 f"({last_error:.2e}, then {est.error:.2e} at {h:g} s): the "
+                                 f"FMUs' tolerance floor or an input sampled off the step grid "
+                                 f"limits the error")
+        if est.ok:
+            last_error = est.error
+    return _fail(report, f"{label}: {MAX_STEP_RUNS} estimates without meeting the target")
+
+
+def _rung(scene, algorithm, extrapolation, h, fmu_dir, report):
+    """(series, result) of a run at step h, or the reason it stopped."""
+    result, why = _run(_trial(scene, algorithm, extrapolation, step=h), fmu_dir, report)
+    if result is None:
+        return f"the run at step {h:g} s stopped: {why}"
+    return recorder_series(result.recorder), result
+
+
+def _fail(report, reason: str):
+    report.reasons.append(reason)
     return None
 
 
-def _next_step(h: float, est: Estimate, target: float) -> float:
-    """The step predicted to meet target x SAFETY, as h / 2^k (k = 1..MAX_HALVINGS): record
-    grids stay nested, so runs are compared at common points without interpolation."""
-    if est.error <= 0:  # the runs agree exactly: halve, the next run observes the order
-        return h / 2.0
-    wanted = h * (SAFETY * target / est.error) ** (1.0 / est.order)
-    k = math.ceil(math.log2(h / wanted) - 1e-9) if wanted < h else 1
-    return h / 2.0 ** min(MAX_HALVINGS, max(1, k))
+def _halvings(est: Estimate, target: float) -> int:
+    """Halvings of the step that bring `est` to target x SAFETY at its order (1..MAX_HALVINGS)."""
+    if est.error <= 0:  # the runs agree exactly: halve, the next estimate observes the order
+        return 1
+    k = math.ceil(math.log2(est.error / (SAFETY * target)) / est.order - 1e-9)
+    return min(MAX_HALVINGS, max(1, k))
 
 
 def _tolerance_walk(scene, algorithm, extrapolation, target, fmu_dir, report):
