@@ -164,6 +164,37 @@ def summary_text(c: dict) -> str:
                       f"{c[v + '_above']} ({100 * c[v + '_above'] / a:.0f} %)" for v in VARIANTS))
 
 
+def finer_comparison(scene, out: Path) -> dict:
+    """The alternative of a finer companion (h/2, order p0; 2x the run's cost) against
+    crankfmu's estimator, on the fixed-step runs at 4, 2 and 1 x the scene's step (the sweep
+    has their h/2, h, 2h and 4h)."""
+    from crankfmu.cosim.estimate import order_rule, richardson
+    from crankfmu.studies.accuracy import Setting
+
+    metric, _ = scene_metric(scene)
+    m = scene.master
+    counts = {"runs": 0, "finer": 0, "crankfmu": 0}
+    for alg in ("gauss-seidel", "jacobi", "iterative"):
+        for ex in (0, 1, 2):
+            for f in (4.0, 2.0, 1.0):
+                h = f * m.step
+                loaded = [load_run(out / "runs", Setting(alg, ex, x, m.fmu_tolerance,
+                                                         m.tolerance).label)
+                          for x in (h, h / 2, 2 * h, 4 * h)]
+                (run, outcome), (fine, _), (c1, _), (c2, _) = loaded
+                if outcome is None or outcome["status"] != "completed" or \
+                        outcome["error"] is None or None in (fine, c1, c2):
+                    continue
+                truth = outcome["error"]
+                counts["runs"] += 1
+                p0, bounds = order_rule(False, ex)
+                counts["finer"] += within(richardson(metric, [run, fine], 0.5, "step", p0),
+                                          truth)
+                counts["crankfmu"] += within(richardson(metric, [run, c1, c2], 2.0, "step", p0,
+                                                        bounds), truth)
+    return counts
+
+
 def main(argv=None) -> int:
     from crankfmu.system.load import load_scene
 
@@ -172,6 +203,8 @@ def main(argv=None) -> int:
     ap.add_argument("--scenes")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--markdown", type=Path, default=None)
+    ap.add_argument("--finer", action="store_true",
+                    help="also compare with a finer companion (h/2) on the fixed-step runs")
     args = ap.parse_args(argv)
     paths = sorted((ROOT / "scenarios").glob("*.toml"))
     if args.scenes:
@@ -202,6 +235,22 @@ def main(argv=None) -> int:
         summary.append(line(scene.name, counts))
     summary.append(line("all", total))
     print("\n".join(summary))
+    if args.finer:
+        rows = ["| scene | fixed-step runs at 4, 2, 1 x step | within 3x: crankfmu's (2h, 4h) "
+                "| finer companion (h/2, 2x the cost) |", "|---|---|---|---|"]
+        all_ = {"runs": 0, "finer": 0, "crankfmu": 0}
+        for path in paths:
+            scene = load_scene(path)
+            if (args.out / scene.name / "runs").is_dir():
+                c = finer_comparison(scene, args.out / scene.name)
+                rows.append(f"| {scene.name} | {c['runs']} | {c['crankfmu']} | {c['finer']} |")
+                for k in all_:
+                    all_[k] += c[k]
+        rows.append(f"| all | {all_['runs']} | {all_['crankfmu']} "
+                    f"({100 * all_['crankfmu'] / max(1, all_['runs']):.0f} %) | {all_['finer']} "
+                    f"({100 * all_['finer'] / max(1, all_['runs']):.0f} %) |")
+        print("\n".join(rows))
+        summary += [""] + rows
     if args.markdown:
         args.markdown.write_text("\n".join(summary) + "\n\n" + "\n\n".join(sections) + "\n")
         print(f"wrote {args.markdown}")
