@@ -1,6 +1,6 @@
 """What the masters cost: their own overhead per macro step, and wall time per accuracy.
 
-    python benchmarks/masters.py [--steps N] [--stop-time T] [--out DIR] [--quick]
+    python benchmarks/masters.py [--steps N] [--stop-time T] [--out DIR] [--quick] [--skip a,b,c]
 
 (a) Master overhead. Two no-op FMUs (no states, constant outputs: doStep returns at once),
     built by crankfmu's build machinery from the benchmark-local physics class below, are wired
@@ -17,6 +17,12 @@
     extrapolation, read off the work-precision curve (log-log interpolation between the two runs
     that bracket the target; marked ~ when extrapolated beyond the sweep), and as ratios to the
     fastest master.
+(c) The floor of issue 11's target (d) (the co-simulation reaching 1e-4 on the servo press's
+    first second uses less CPU than scipy's one call): the cheapest co-simulation found by
+    benchmarks/runtime.py (d) (--floor-setting), its CPU split into the FMUs' doStep and the
+    rest, against scipy's RK45 in one call at rtol 1e-4, and the floor: its doStep count times
+    (the bare FMI calls per step of two no-op FMUs + 6 right-hand-side calls, the fewest a
+    Dormand-Prince step makes, at the composed model's cost per call).
 
 Figures are printed, not asserted: timings depend on the machine.
 """
@@ -256,7 +262,7 @@ def _check(status: int) -> None:
 
 
 def overhead_table(fmu: Path, folder: Path, n: int, repeats: int = 5) -> list[tuple]:
-    from crankfmu.cosim.masters import MASTERS
+    from crankfmu.masters import MASTERS
 
     step = 1e-3
     scene = noop_scene(fmu, folder, step, n * step)
@@ -336,6 +342,102 @@ def print_accuracy(curves: dict, targets=(1e-3, 1e-5)) -> None:
           "the fastest setting for that target)")
 
 
+# -- (c) the floor of the co-simulation's CPU against scipy's one call (issue 11, target d) ------
+RK_STAGES = 6  # new right-hand-side calls per Dormand-Prince 5(4) step (FSAL): the fewest an
+#                FMU's doStep can make (one internal step per communication step)
+
+
+def floor_table(out: Path, setting: tuple, target: float = 1e-4, repeats: int = 3) -> None:
+    """The servo press's first second: the co-simulation `setting` = (algorithm,
+    extrapolation, step, tolerance) and scipy's RK45 in one call at rtol `target` (both reach
+    `target` in benchmarks/runtime.py (d)), with the co-simulation's CPU split into the FMUs'
+    doStep and the rest (master, runner, fmi2Set/GetReal), and its floor:
+        doStep calls x (bare FMI calls per step of 2 no-op FMUs + RK_STAGES x the composed
+        right-hand side's cost per call),
+    what a co-simulation with that many communication steps costs with a master and an FMU
+    runtime that cost nothing beyond the FMI calls and the fewest right-hand-side calls."""
+    from scipy.integrate import solve_ivp
+
+    from crankfmu.studies.accuracy import make_metric
+    from crankfmu.studies.accuracy.sweep import load_or_solve_reference
+    from crankfmu.fmu import instance as fmu_module
+    from crankfmu.cosim.runner import RunOptions, run_scene
+    from crankfmu.reference.composed import ComposedModel
+    from crankfmu.reference.solve import RecordMap, record_times
+    from crankfmu.system.load import load_scene
+
+    scene = load_scene(ROOT / "scenarios" / "servo_press.toml")
+    scene.stop_time = 1.0
+    metric = make_metric("max", scene.record)
+    grid = record_times(scene)
+    ref, _, _ = load_or_solve_reference(scene, grid, out / "reference", 1e-10)
+    algorithm, ex, step, tol = setting
+    trial = copy.deepcopy(scene)
+    m = trial.master
+    m.algorithm, m.extrapolation, m.step = algorithm, ex, step
+    if tol is not None:
+        m.tolerance = tol
+    in_do_step = [0.0]
+    original = fmu_module.FmuInstance.do_step
+
+    def timed_do_step(self, t, h):
+        start = CLOCK()
+        try:
+            original(self, t, h)
+        finally:
+            in_do_step[0] += CLOCK() - start
+    runs = []
+    fmu_module.FmuInstance.do_step = timed_do_step
+    try:
+        for _ in range(repeats):
+            in_do_step[0] = 0.0
+            result = run_scene(copy.deepcopy(trial), RunOptions(out=out / "floor.csv",
+                                                                progress=False))
+            runs.append((result.cpu_seconds, in_do_step[0], result))
+    finally:
+        fmu_module.FmuInstance.do_step = original
+    cpu, inside, result = sorted(runs, key=lambda r: r[0])[len(runs) // 2]
+    rec = result.recorder
+    error = metric.error(rec.rows[:, 0], {k: rec.column(k) for k in rec.names}, ref)
+    calls = max(s["doStep_calls"] for s in result.statistics.values())
+    noop = build_noop(out / "noop_fmu")
+    bare = min(bare_seconds(noop, "gauss-seidel", min(ex, 1), 2000, step) for _ in range(5)) / 2000
+    model = ComposedModel(scene)
+    x0 = np.asarray(model.initial_state(t0=scene.start_time), dtype=float)
+    rhs = min(_per_call(lambda: model.derivatives(0.0, x0, []), 2000) for _ in range(5))
+    scipy_runs = []
+    for _ in range(5):
+        start = CLOCK()
+        sol = solve_ivp(lambda t, y: model.derivatives(t, y, []), (scene.start_time, 1.0), x0,
+                        method="RK45", rtol=target, atol=target * model.state_nominal(),
+                        t_eval=grid)
+        scipy_runs.append(CLOCK() - start)
+    rows = RecordMap(model)
+    values = np.array([rows.row(t, y) for t, y in zip(sol.t, sol.y.T)])
+    scipy_error = metric.error(sol.t, {n: values[:, k] for k, n in enumerate(scene.record)}, ref)
+    scipy_cpu = sorted(scipy_runs)[2]
+    floor = calls * (bare + RK_STAGES * rhs)
+    label = f"{algorithm} ex{ex} " + (f"tol {tol:g}" if tol is not None else f"h {step:g}")
+    print(f"co-simulation {label}: error {error:.2e}, {calls} doStep calls per FMU, CPU "
+          f"{cpu:.4f} s = {inside:.4f} s in doStep (FMU runtime and physics) + "
+          f"{cpu - inside:.4f} s master, runner, set/get")
+    print(f"scipy RK45 one call, rtol {target:g}: error {scipy_error:.2e}, {sol.nfev} right-hand "
+          f"side calls ({sol.nfev / RK_STAGES:.0f} steps), CPU {scipy_cpu:.4f} s")
+    print(f"composed right-hand side: {rhs * 1e6:.1f} us per call; bare FMI calls of 2 no-op "
+          f"FMUs: {bare * 1e6:.1f} us per communication step")
+    print(f"floor of this co-simulation: {calls} x ({bare * 1e6:.1f} + {RK_STAGES} x "
+          f"{rhs * 1e6:.1f}) us = {floor:.4f} s")
+    print(f"ratios to scipy: co-simulation {cpu / scipy_cpu:.2f}, doStep alone "
+          f"{inside / scipy_cpu:.2f}, floor {floor / scipy_cpu:.2f} (target < 1)")
+
+
+def _per_call(call, n: int) -> float:
+    start = CLOCK()
+    for _ in range(n):
+        call()
+    return (CLOCK() - start) / n
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=10000, help="macro steps for (a)")
@@ -343,10 +445,14 @@ def main(argv=None) -> int:
     parser.add_argument("--out", type=Path, default=Path(tempfile.gettempdir()) / "crankfmu_bench")
     parser.add_argument("--fmus", type=Path, help="folder of built catalog FMUs for (b)")
     parser.add_argument("--quick", action="store_true", help="fewer steps in (b)")
-    parser.add_argument("--skip", choices=("a", "b"), help="skip part a or b")
+    parser.add_argument("--skip", default="", help="parts to skip, e.g. a,b")
+    parser.add_argument("--floor-setting", default="adaptive,2,1e-3,3e-4",
+                        help="(c): algorithm,extrapolation,step,tolerance ('-': none) of the "
+                             "cheapest co-simulation reaching 1e-4 (benchmarks/runtime.py (d))")
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
-    if args.skip != "a":
+    skip = set(args.skip.split(","))
+    if "a" not in skip:
         fmu = build_noop(args.out / "noop_fmu")
         print(f"(a) master overhead per macro step, 2 no-op FMUs ({fmu.name}), "
               f"{args.steps} steps, CPU time per step, best of 5")
@@ -355,7 +461,7 @@ def main(argv=None) -> int:
             print(f"{alg:<13} {ex:>2} {ours * 1e6:>14.1f} {bare * 1e6:>14.1f} "
                   f"{ours / bare:>6.2f}")
         print("target: ratio <= 1.5\n")
-    if args.skip != "b":
+    if "b" not in skip:
         print(f"(b) servo press, 0 to {args.stop_time:g} s: wall time to reach a relative error")
         result, curves, orders = accuracy_table(args.out / "accuracy", args.stop_time,
                                                 args.fmus, args.quick)
@@ -363,6 +469,11 @@ def main(argv=None) -> int:
         print_accuracy(curves)
         print(orders)
         print(f"work-precision plot: {result.png}")
+    if "c" not in skip:
+        alg, ex, step, tol = args.floor_setting.split(",")
+        print("\n(c) servo press 0-1 s at 1e-4: the co-simulation's CPU, its floor, scipy's "
+              "one call")
+        floor_table(args.out, (alg, int(ex), float(step), None if tol == "-" else float(tol)))
     return 0
 
 

@@ -202,7 +202,7 @@ def spawn(engine: str, args, ssp: Path | None, result: Path) -> dict:
 
 
 def engines() -> list[str]:
-    from crankfmu.cosim.masters import MASTERS
+    from crankfmu.masters import MASTERS
     return [f"crankfmu:{name}" for name in MASTERS] + list(PEERS)
 
 

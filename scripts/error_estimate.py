@@ -64,7 +64,7 @@ def ensure_companions(scene, settings, out: Path, jobs: int) -> None:
 
 def rows_for_scene(scene, out: Path, jobs: int):
     from crankfmu.cosim.estimate import RATIO_TOLERANCE, STEP_RATIO, nominal_order, richardson
-    from crankfmu.cosim.masters import MASTERS
+    from crankfmu.masters import MASTERS
     from crankfmu.studies.accuracy import Setting
 
     metric, _ = scene_metric(scene)

@@ -38,7 +38,7 @@ import traceback
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT))  # a script of the checkout: its case generators are tests.support.fuzz
 MARK = "@@fuzz@@ "
 
 
@@ -168,7 +168,7 @@ def run_cases(cases: list[dict], work: Path, fmus: Path, timeout: float, tally, 
     start = time.monotonic()
     for k, case in enumerate(cases):
         case_dir = work / case["id"]
-        from fuzz.scenes import write_case
+        from tests.support.fuzz.scenes import write_case
         write_case({**case, "files": {f"work/{n}": d for n, d in case["files"].items()}},
                    case_dir)
         before = {str(p.relative_to(case_dir)) for p in case_dir.rglob("*")}
@@ -212,7 +212,7 @@ def run_cases(cases: list[dict], work: Path, fmus: Path, timeout: float, tally, 
 
 # -- Ctrl-C ----------------------------------------------------------------------------------------
 def ctrl_c_campaign(n: int, fmus: Path, work: Path, seed: int) -> dict:
-    from fuzz.scenes import ROTOR
+    from tests.support.fuzz.scenes import ROTOR
     rng = random.Random(seed)
     scene = work / "ctrl_c.toml"
     # about 60 s of wall time on this 2-core machine (1000 s simulated at 1 ms steps)
@@ -265,16 +265,16 @@ def main() -> int:
     fmus = fmus.resolve()
     Worker.tmp = work / "tmp"
     Worker.tmp.mkdir(exist_ok=True)
-    from fuzz.overrides import override_cases
-    from fuzz.scenes import scene_cases
-    from fuzz.ssp import ssp_cases
+    from tests.support.fuzz.overrides import override_cases
+    from tests.support.fuzz.scenes import scene_cases
+    from tests.support.fuzz.ssp import ssp_cases
     groups = []
     if args.scenes:
         groups.append(("scenes", scene_cases(args.seed, args.scenes)))
     if args.ssp:
         from crankfmu.system.load import load_scene
         from crankfmu.system.ssp_export import export_ssp
-        from fuzz.scenes import ROTOR
+        from tests.support.fuzz.scenes import ROTOR
         (work / "rotor.toml").write_text(ROTOR)
         base = export_ssp(load_scene(work / "rotor.toml"), work / "rotor.ssp", fmus).read_bytes()
         groups.append(("ssp", ssp_cases(args.seed, args.ssp, base)))

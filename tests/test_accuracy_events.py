@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from conftest import SCENARIOS
+from tests.conftest import SCENARIOS
 from crankfmu.studies.accuracy import (AccuracyOptions, EventSpec, Setting, event_error,
                                        parse_event_specs, run_accuracy)
 from crankfmu.cosim.events import EventSpecError, event_values

@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import SCENARIOS
+from tests.conftest import SCENARIOS
 
 SERVO = SCENARIOS / "servo_press.toml"
 
@@ -149,9 +149,9 @@ def test_compare_accuracy_and_sweep_write_only_into_out(tmp_path, monkeypatch, f
     b = copy.deepcopy(a)
     b.name = "with_flywheel"
     b.components["motor"].parameters["J_flywheel"] = 0.1
-    cmp = crankfmu.studies.compare(a, b, stop_time=0.7, fmu_dir=fmu_dir)
+    cmp = crankfmu.compare(a, b, stop_time=0.7, fmu_dir=fmu_dir)
     assert "N.m" in cmp["text"] and cmp["csv"] is None
-    acc = crankfmu.studies.accuracy(SERVO, stop_time=0.05, algorithms=["gauss-seidel"],
+    acc = crankfmu.accuracy(SERVO, stop_time=0.05, algorithms=["gauss-seidel"],
                             extrapolations=[0], steps=[2e-3], fmu_dir=fmu_dir,
                             reference_rtol=1e-8)
     assert acc.outcomes[0].ok and acc.csv is None
@@ -159,7 +159,7 @@ def test_compare_accuracy_and_sweep_write_only_into_out(tmp_path, monkeypatch, f
                            fmu_dir=fmu_dir, progress=False)
     assert len(table) == 2 and table.csv is None and table.rows[1]["status"] == "completed"
     assert list(tmp_path.iterdir()) == []
-    crankfmu.studies.accuracy(SERVO, out=tmp_path / "acc", stop_time=0.05, algorithms=["jacobi"],
+    crankfmu.accuracy(SERVO, out=tmp_path / "acc", stop_time=0.05, algorithms=["jacobi"],
                       extrapolations=[0], steps=[2e-3], fmu_dir=fmu_dir, reference_rtol=1e-8)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["acc"]
     assert (tmp_path / "acc" / "accuracy.csv").is_file()

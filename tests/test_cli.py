@@ -8,7 +8,7 @@ import sys
 import numpy as np
 from fmpy.util import read_csv
 
-from conftest import ROOT, SCENARIOS
+from tests.conftest import ROOT, SCENARIOS
 
 
 def crankfmu(*args, cwd=ROOT):

@@ -9,7 +9,7 @@ import re
 
 import pytest
 
-from conftest import SCENARIOS
+from tests.conftest import SCENARIOS
 
 
 def _commands(parser, path=()):
@@ -24,9 +24,13 @@ def _commands(parser, path=()):
 
 def _reads(source: str, dest: str) -> bool:
     """args.dest, or getattr(args, ...) with the name "dest" written in the same code (a loop
-    over option names)."""
+    over option names), or a master's declared option read by the loop over the declarations
+    (cli._master_options_from)."""
+    from crankfmu.masters import all_options
+    declared = dest.startswith("master_") and dest[len("master_"):] in all_options()
     return re.search(rf"args\.{dest}\b", source) is not None or \
-        ("getattr(args, " in source and f'"{dest}"' in source)
+        ("getattr(args, " in source and f'"{dest}"' in source) or \
+        (declared and 'getattr(args, f"master_{name}"' in source)
 
 
 def test_every_option_is_used_by_its_command():
@@ -43,7 +47,7 @@ def test_every_option_is_used_by_its_command():
     for path, sub in _commands(parser):
         func = sub.get_default("func")
         source = inspect.getsource(func)
-        for helper in (cli.load_with_options,):
+        for helper in (cli.load_with_options, cli._master_options_from):
             if helper.__name__ in source:
                 source += inspect.getsource(helper)
         for action in sub._actions:

@@ -1,7 +1,7 @@
 """The clutch-driven hammer (scenarios/clutch_hammer.toml: induction motor + planetary clutch
 drive + crank-rocker hammer in mode driven_crank, carrier rigidly on the crank shaft): blows on
 command, energy balance, and agreement with the monolithic RIGID reference of
-tests/clutch_reference.py (the hammer in its integrating mode, inputs from the state, one ODE at
+tests/support/clutch_reference.py (the hammer in its integrating mode, inputs from the state, one ODE at
 rtol 1e-11).
 
 Master and step: Gauss-Seidel [drive, hammer, motor], h = 1 ms (the scene's). The hammer's
@@ -14,8 +14,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import clutch_reference as C
-from conftest import SCENARIOS
+from tests.support import clutch_reference as C
+from tests.conftest import SCENARIOS
 from crankfmu.cosim.runner import RunOptions, run_scene
 from crankfmu.system.load import load_scene
 

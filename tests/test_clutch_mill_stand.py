@@ -1,6 +1,6 @@
 """The clutch-driven mill stand (scenarios/clutch_mill_stand.toml: induction motor + planetary
 clutch drive + mill stand in mode driven_crank, carrier rigidly on the crank shaft) against the
-monolithic RIGID reference of tests/clutch_reference.py (the stand in its integrating mode, its
+monolithic RIGID reference of tests/support/clutch_reference.py (the stand in its integrating mode, its
 load read from crank_acceleration and reduced_inertia, inputs from the state, one ODE at rtol
 1e-11), and its energy balance.
 
@@ -14,8 +14,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import clutch_reference as C
-from conftest import SCENARIOS
+from tests.support import clutch_reference as C
+from tests.conftest import SCENARIOS
 from crankfmu.cosim.runner import RunOptions, run_scene
 from crankfmu.system.load import load_scene
 

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from conftest import SCENARIOS
+from tests.conftest import SCENARIOS
 from crankfmu.studies.compare import Series, metrics, stroke_ends
 from crankfmu.system.scene import SceneError
 from crankfmu.system.load import load_scene

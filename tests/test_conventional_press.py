@@ -1,6 +1,6 @@
 """The conventional press scene (induction motor + planetary drive + Stephenson press, carrier
 rigidly on the press shaft through the press's driven_crank mode) against the monolithic RIGID
-reference of tests/conventional_press_reference.py (one ODE, same physics modules, inputs
+reference of tests/support/conventional_press_reference.py (one ODE, same physics modules, inputs
 evaluated from the state, events located at rtol 1e-11).
 
 Master and step: Gauss-Seidel, order [drive, press, motor], h = 1 ms (the scene's). The press
@@ -18,8 +18,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import conventional_press_reference as C
-from conftest import SCENARIOS
+from tests.support import conventional_press_reference as C
+from tests.conftest import SCENARIOS
 from crankfmu.cosim.runner import RunOptions, run_scene
 from crankfmu.system.load import load_scene
 

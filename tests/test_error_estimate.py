@@ -19,7 +19,7 @@ from crankfmu.cosim.metrics import ReferenceSamples
 from crankfmu.cosim.runner import RunOptions, run_scene
 from crankfmu.cosim.target import TargetNotMet, search
 from crankfmu.system.load import load_scene
-from test_masters import OSCILLATOR, exact_speeds, rotor_fmus, scene_file  # noqa: F401
+from tests.test_masters import OSCILLATOR, exact_speeds, rotor_fmus, scene_file  # noqa: F401
 
 SPEEDS = ["r1.flange_w", "r2.w"]
 

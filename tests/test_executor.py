@@ -9,7 +9,7 @@ import math
 from crankfmu.system.load import load_scene
 from crankfmu.studies.executor import LocalPoolExecutor
 
-from conftest import SCENARIOS
+from tests.conftest import SCENARIOS
 
 
 def test_accuracy_on_a_pool_equals_serial(fmu_dir, tmp_path):

@@ -60,16 +60,14 @@ def test_exit_release_reaches_every_loaded_copy_of_the_binary(fmu_dir):
     copy; a sporadic abort, see docs/architecture.md). Run in a fresh process that must exit
     with 0."""
     script = (
-        "import sys\n"
-        f"sys.path.insert(0, {str(Path(__file__).parent)!r})\n"
         "from pathlib import Path\n"
-        "from test_exit_crash import _cycle\n"
+        "from tests.test_exit_crash import _cycle\n"
         "from crankfmu.fmu.instance import release_pythonfmu_states\n"
         "for k in range(3):\n"
         f"    _cycle(Path({str(fmu_dir / 'DcServoMotor.fmu')!r}), f'm{{k}}')\n"
         f"    _cycle(Path({str(fmu_dir / 'StephensonPress.fmu')!r}), f'p{{k}}')\n"
         "print(release_pythonfmu_states(), release_pythonfmu_states())\n")
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                          timeout=120)
+                          timeout=120, cwd=Path(__file__).resolve().parents[1])  # tests.*
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.split() == ["2", "2"]  # two copies (not six), found again by a 2nd call

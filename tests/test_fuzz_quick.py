@@ -12,9 +12,9 @@ from pathlib import Path
 import pytest
 
 from crankfmu.cli import main
-from fuzz.overrides import override_cases
-from fuzz.scenes import KINDS, ROTOR, TEXT_KINDS, scene_cases, write_case
-from fuzz.ssp import ssp_cases
+from tests.support.fuzz.overrides import override_cases
+from tests.support.fuzz.scenes import KINDS, ROTOR, TEXT_KINDS, scene_cases, write_case
+from tests.support.fuzz.ssp import ssp_cases
 
 SEED = 16
 SLOW_SSP_KINDS = {"fmu_entry_huge", "many_entries", "ssd_huge", "external_ssv_huge"}

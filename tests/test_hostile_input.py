@@ -28,8 +28,8 @@ from crankfmu.system.scene import SceneError
 from crankfmu.system.load import load_scene
 from crankfmu.system.scene import apply_overrides
 
-from conftest import ROOT, SCENARIOS
-from fuzz.scenes import LOOP
+from tests.conftest import ROOT, SCENARIOS
+from tests.support.fuzz.scenes import LOOP
 
 SERVO = (SCENARIOS / "servo_press.toml").read_text()
 

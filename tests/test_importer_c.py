@@ -28,7 +28,7 @@ import pytest
 from fmpy import extract, read_model_description
 
 from crankfmu.models.catalog import FMU_MODELS
-from importer_support import build_catalog, real_outputs, step_in_process
+from tests.support.importer_support import build_catalog, real_outputs, step_in_process
 
 HOST_SOURCE = Path(__file__).resolve().parent / "c_host" / "host.c"
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"

@@ -8,12 +8,12 @@ import pytest
 from crankfmu.cosim.runner import RunOptions, run_scene
 from crankfmu.models.catalog import FMU_MODELS
 
-from importer_support import require_ecospy
+from tests.support.importer_support import require_ecospy
 
 require_ecospy()
 from crankfmu.interop import ecos  # noqa: E402
 from crankfmu.interop.plan import plan_scene, plan_single_fmu  # noqa: E402
-from importer_support import (IMPORTER_STOP, catalog_fmus, jacobi_scene,  # noqa: E402,F401
+from tests.support.importer_support import (IMPORTER_STOP, catalog_fmus, jacobi_scene,  # noqa: E402,F401
                               relative_deviation)
 
 STOP = IMPORTER_STOP  # s (importer_support: 200 Jacobi steps of 1 ms)
@@ -158,7 +158,7 @@ def test_every_fmu_runs_in_the_native_ecos_cli_as_in_fmpy(catalog_fmus, ecos_cli
     """All catalog FMUs, unconnected, in one native ecos run (one Python start): each on its
     start values, compared with fmpy stepping the same FMU alone in this process."""
     from crankfmu.fmu.instance import FmuInstance  # noqa: F401 (the exit-order fix in this process)
-    from importer_support import step_in_process
+    from tests.support.importer_support import step_in_process
     fmus = {model: catalog_fmus / f"{model}.fmu" for model in FMU_MODELS}
     got = run_ecos_cli(ecos_cli, _unconnected_ssp(fmus, tmp_path / "catalog.ssp"), NATIVE_STOP,
                        tmp_path)

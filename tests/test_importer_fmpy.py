@@ -22,7 +22,7 @@ from fmpy import read_model_description, simulate_fmu
 from crankfmu.runtime.model import held
 from crankfmu.models.catalog import FMU_MODELS, physics_class
 from crankfmu.runtime.slave import DEFAULT_TOLERANCE
-from importer_support import build_catalog, real_outputs
+from tests.support.importer_support import build_catalog, real_outputs
 
 RUN_STEPS = 300  # steps run and compared (0.3 s at the default 1 ms)
 

@@ -15,7 +15,7 @@ from crankfmu.system.scene import SceneError
 pytest.importorskip("libcosimpy")
 from crankfmu.interop import libcosim  # noqa: E402
 from crankfmu.interop.plan import plan_scene, plan_single_fmu  # noqa: E402
-from importer_support import (IMPORTER_STOP, catalog_fmus, jacobi_scene,  # noqa: E402,F401
+from tests.support.importer_support import (IMPORTER_STOP, catalog_fmus, jacobi_scene,  # noqa: E402,F401
                               relative_deviation)
 
 STOP = IMPORTER_STOP  # s (importer_support: 200 Jacobi steps of 1 ms)

@@ -1,7 +1,7 @@
 """The package's imports point one way (docs/architecture.md opens with the picture):
 
-    runtime <- models <- errors <- fmu <- system <- cosim <- reference, interop <- studies
-            <- commands, cli, api
+    runtime <- models <- errors <- fmu <- masters <- system <- cosim <- reference, interop
+            <- studies <- commands, cli, api
 
 A module may import its own layer or a lower one, never a higher one, and no set of modules
 imports itself round a cycle. Inside the bottom two: the runtime (bundled in every FMU) imports
@@ -16,7 +16,8 @@ from pathlib import Path
 import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "sources" / "crankfmu"
-LAYERS = (("runtime", "version"), ("models",), ("errors",), ("fmu",), ("system",), ("cosim",),
+LAYERS = (("runtime", "version"), ("models",), ("errors",), ("fmu",), ("masters",), ("system",),
+          ("cosim",),
           ("reference", "interop"), ("studies",), ("commands", "cli", "api", "__main__", ""))
 RANK = {top: rank for rank, tops in enumerate(LAYERS) for top in tops}
 
@@ -132,3 +133,28 @@ def test_the_checker_sees_a_cycle_and_an_upward_import():
 def test_every_model_folder_has_its_readme(model):
     readme = PACKAGE / "models" / model / "README.md"
     assert readme.is_file() and "## " in readme.read_text(), f"{readme}: the model card is missing"
+
+
+def test_one_place_maps_errors_to_exit_status_2():
+    """Every user error derives from crankfmu.errors.CrankfmuError and cli.main alone turns it
+    into `error: ...` and exit 2: no command returns 2 on its own or catches its own error."""
+    own_exits = [f"{m}:{node.lineno}" for m, path in MODULES.items() if m != "cli"
+                 for node in ast.walk(ast.parse(path.read_text()))
+                 if isinstance(node, ast.Return) and isinstance(node.value, ast.Constant)
+                 and node.value.value == 2]
+    assert not own_exits, own_exits
+
+
+@pytest.mark.parametrize("name", ["MechanismError", "MetricError", "EventSpecError", "SweepError",
+                                  "CompositionError", "SceneError", "OptionError"])
+def test_user_errors_derive_from_the_one_base(name):
+    import crankfmu.errors as errors
+    from crankfmu.reference.composed import CompositionError
+    from crankfmu.studies.accuracy.events import EventSpecError
+    from crankfmu.studies.accuracy.metrics import MetricError
+    from crankfmu.studies.structure.description import MechanismError
+    from crankfmu.studies.sweep import SweepError
+    found = {**vars(errors), "CompositionError": CompositionError, "MetricError": MetricError,
+             "EventSpecError": EventSpecError, "MechanismError": MechanismError,
+             "SweepError": SweepError}
+    assert issubclass(found[name], errors.CrankfmuError)

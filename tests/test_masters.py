@@ -237,7 +237,8 @@ def test_cli_run_prints_coupling_error(tmp_path, rotor_fmus, capsys):
                  "--no-progress"])
     out = capsys.readouterr().out
     assert code == 0
-    assert "with adaptive (extrapolation 1)" in out and "accepted_steps" in out
+    assert "with adaptive (extrapolation 1, tolerance 0.001, min_step 1e-06, max_step 0.01)" \
+        in out and "accepted_steps" in out
     assert "coupling error at r2 -> r1: energy mismatch" in out
 
 
@@ -248,7 +249,7 @@ def test_taylor_rows_match_a_vandermonde_solve(s):
     interpolation problem. Row k is compared times h^k (h = the largest |s|): that is its
     contribution to the input over a step, and the scaled problem is well conditioned, so both
     agree to round-off (1e-12 of values of order 1; a wrong coefficient gives O(1))."""
-    from crankfmu.cosim.masters.base import taylor_rows
+    from crankfmu.masters.base import taylor_rows
 
     values = np.random.default_rng(7).normal(size=(len(s), 3))
     h = max(abs(x) for x in s)
@@ -261,7 +262,7 @@ def test_taylor_rows_match_a_vandermonde_solve(s):
 def test_taylor_rows_hold_a_constant_exactly():
     """A constant signal must reach the FMU with derivatives exactly 0 (it then integrates a
     held input), and the value row must be the value itself: no round-off allowed."""
-    from crankfmu.cosim.masters.base import taylor_rows
+    from crankfmu.masters.base import taylor_rows
 
     rows = taylor_rows((0.0, -1e-3, -2e-3), np.array([[0.05, 572.0]] * 3))
     assert rows[0].tolist() == [0.05, 572.0] and not np.any(rows[1:])

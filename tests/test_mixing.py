@@ -22,7 +22,7 @@ from fmpy import read_model_description
 
 from crankfmu.fmu import build
 from crankfmu.models.catalog import FMU_MODELS
-from importer_support import build_catalog, step_in_process, step_together
+from tests.support.importer_support import build_catalog, step_in_process, step_together
 
 TESTS = Path(__file__).resolve().parent
 H, N_STEPS, RTOL = 1e-3, 100, 1e-8
@@ -67,8 +67,7 @@ def run_in_fresh_process(fmus: list[tuple[str, Path]]) -> dict:
     packages it imported."""
     script = (
         "import json, sys\n"
-        f"sys.path.insert(0, {str(TESTS)!r})\n"
-        "from importer_support import step_together\n"
+        "from tests.support.importer_support import step_together\n"
         "specs = [(n, p, None) for n, p in json.loads(sys.argv[1])]\n"
         f"res = step_together(specs, {H!r}, {N_STEPS}, {RTOL!r})\n"
         "out = {n: dict(zip(names, rows[-1, 1:].tolist())) for n, (names, rows) in res.items()}\n"
@@ -76,7 +75,8 @@ def run_in_fresh_process(fmus: list[tuple[str, Path]]) -> dict:
         "print(json.dumps({'outputs': out, 'runtimes': rt}))\n")
     done = subprocess.run([sys.executable, "-c", script,
                            json.dumps([(n, str(p)) for n, p in fmus])],
-                          capture_output=True, text=True, timeout=120)
+                          capture_output=True, text=True, timeout=120,
+                          cwd=TESTS.parent)  # `python -c` puts the working folder first: tests.*
     assert done.returncode == 0, done.stderr[-3000:]
     return json.loads(done.stdout.splitlines()[-1])
 

@@ -2,7 +2,7 @@
 
 Scene: the brief's drive (PlanetaryClutchDrive defaults) with a 5.5 kW, 1000 rpm induction motor
 (lambda_k = 2.2) whose rotor and flywheel are counted in J_a (motor J = 0). Command at t = 0 from
-the steady state. Three independent ways to the same numbers (tests/planetary_reference.py):
+the steady state. Three independent ways to the same numbers (tests/support/planetary_reference.py):
 
 * REF: a monolithic motor + drive ODE in Newton-Euler form (tooth force as unknown), event
   location with DOP853 at rtol = atol = 1e-12;
@@ -34,10 +34,11 @@ import math
 import numpy as np
 import pytest
 
-import planetary_reference as R
+from tests.support import planetary_reference as R
 from crankfmu.runtime.model import ParameterError, held
 from crankfmu.models.induction_motor.induction_motor import InductionMotor
-from crankfmu.models.planetary_drive.planetary_drive import PlanetaryClutchDrive, steady_state
+from crankfmu.models.planetary_drive.planetary_drive import (Direction, Modes, PlanetaryClutchDrive,
+                                                             steady_state)
 
 T_END = 0.4   # s: engagement and stopping end near 0.17 s; the rest checks the held phase
 H = 1e-3      # s: communication step
@@ -286,9 +287,10 @@ def test_stick_slip_under_pulsed_press_load():
     states = []
     out, rows, _ = R.run_model(drive, motor.torque, 1.0, 1.2, H, "zoh",
                                u_extra=pulsed_load(),
-                               sample=lambda d, t, x: states.append((t, d.d["dir_b"], x[2])))
+                               sample=lambda d, t, x: states.append(
+                                   (t, d.modes.elements["b"].direction.sign, x[2])))
     d = out["discrete"]
-    assert d["n_lock_b"] == 4 and d["n_slip_b"] == 4
+    assert d["elements"]["b"]["n_lock"] == 4 and d["elements"]["b"]["n_slip"] == 4
     assert d["n_pass"] == 0 and d["n_events"] == 8  # no command edge: input command stays 1
     assert all(w == 0.0 for t, mode, w in states if mode == 0)
     slipping = [t for t, mode, w in states if mode != 0]
@@ -310,7 +312,8 @@ def test_pass_through_zero_when_the_brake_cannot_hold():
     out, rows, _ = R.run_model(drive, motor.torque, 0.0, 1.0, H, "zoh",
                                u_extra=lambda t: (-300.0, 0.0))
     d = out["discrete"]
-    assert d["n_pass"] == 1 and d["n_lock_h"] == 0 and d["dir_h"] == -1
+    h = d["elements"]["h"]
+    assert d["n_pass"] == 1 and h["n_lock"] == 0 and h["direction"] == Direction.BACKWARD.sign
     assert d["n_events"] == 3  # command edge, ring breaks free, carrier passes zero
     assert out["w_h"] < -1.0 and out["period"] == 4
 
@@ -334,7 +337,29 @@ def test_rollback_reproduces_the_step_bitwise():
         results.append((y.copy(), drive.discrete_state()))
     assert np.array_equal(results[0][0], results[1][0])
     assert results[0][1] == results[1][1]
-    assert results[0][1]["n_lock_b"] == 1
+    assert results[0][1]["elements"]["b"]["n_lock"] == 1
+
+
+def test_modes_survive_a_json_round_trip_exactly():
+    """The typed modes (Modes: brakes, per-element Direction and lock history, event counts)
+    go through the JSON an FMU state save uses and come back equal, field by field (dataclass
+    equality: a field that to_json forgot would come back as its default and fail). Taken in
+    the middle of a power-law engagement, after a break-free and with t_last finite, and at the
+    start (t_last = -inf, saved as None)."""
+    import json
+    drive, motor = make("engage", False, ["power_law"])
+    u = np.array([1.0, motor.torque(drive.p.w_a_start), 0, 0, 0])
+    x = drive.initial_state(u)
+    fresh = json.loads(json.dumps(drive.discrete_state()))
+    assert fresh["t_last"] is None and Modes.from_json(fresh) == drive.modes
+    for i in range(150):  # past the carrier's break-free and the power law's kink at t_c
+        x = drive.advance(i * H, x, H, held(u), 1e-10, 1e-10)
+    modes = drive.modes
+    assert modes.elements["h"].direction is Direction.FORWARD and modes.t_last > 0.0
+    assert modes.elements["h"].n_slip == 1 and modes.brakes["b"].engaging
+    restored = Modes.from_json(json.loads(json.dumps(drive.discrete_state())))
+    assert restored == modes and restored is not modes
+    assert restored.elements["h"].direction is Direction.FORWARD  # the enum, not its int
 
 
 def test_motor_start_from_rest_all_locked():
@@ -355,8 +380,9 @@ def test_motor_start_from_rest_all_locked():
         x = drive.advance(t, x, h, held(u), 1e-10, 1e-10)
         t += h
     d = drive.discrete_state()
-    assert d["n_slip_b"] == 1 and d["n_slip_a"] == 1 and d["t_slip_b"] == 0.0
-    assert d["dir_a"] == 1 and d["dir_b"] == -1 and d["dir_h"] == 0
+    a, b, h = (d["elements"][k] for k in "abh")
+    assert b["n_slip"] == 1 and a["n_slip"] == 1 and b["t_slip"] == 0.0
+    assert a["direction"] == 1 and b["direction"] == -1 and h["direction"] == 0
     assert x[3] == 0.0 and drive.period() == 1
     ss = steady_state(drive, motor, 1)
     assert drive.sun_speed(x) == pytest.approx(ss["w_a"], rel=1e-3)
@@ -406,8 +432,8 @@ def test_command_edge_inside_a_step_is_located():
     def u_of_t(t):
         return np.array([0.5 + (t - t_cross) * 10.0, M, 0, 0, 0])
     x = drive.advance(0.01, x, 0.01, u_of_t, 1e-10, 1e-10)
-    assert drive.d["t_command"] == pytest.approx(t_cross, abs=1e-12)
-    assert drive.d["command"] == 1 and drive.period() == 2
+    assert drive.modes.t_command == pytest.approx(t_cross, abs=1e-12)
+    assert drive.modes.command == 1 and drive.period() == 2
 
 
 def test_command_reversal_during_engagement():
@@ -428,4 +454,4 @@ def test_command_reversal_during_engagement():
         x = drive.advance(t, x, H, held(u), 1e-10, 1e-10)
         t += H
     assert drive.period() == 1 and x[3] == 0.0
-    assert drive.d["n_lock_b"] == 0 and drive.d["n_lock_h"] == 1
+    assert drive.modes.elements["b"].n_lock == 0 and drive.modes.elements["h"].n_lock == 1

@@ -1,5 +1,5 @@
 """The planetary engagement and stopping scenes, run as two FMUs (InductionMotor + PlanetaryClutchDrive)
-through the runner, against the event-located monolithic reference of tests/planetary_reference.py.
+through the runner, against the event-located monolithic reference of tests/support/planetary_reference.py.
 
 What is compared and why the tolerances:
 * Times (break-free of the released member, lock of the braked one) and end speeds: 1e-4
@@ -26,8 +26,8 @@ import tomllib
 import numpy as np
 import pytest
 
-import planetary_reference as R
-from conftest import SCENARIOS
+from tests.support import planetary_reference as R
+from tests.conftest import SCENARIOS
 from crankfmu.cosim.runner import RunOptions, run_scene
 from crankfmu.models.induction_motor.induction_motor import InductionMotor
 from crankfmu.models.planetary_drive.planetary_drive import PlanetaryClutchDrive, steady_state

@@ -11,18 +11,14 @@ the kinetic energy 2T/phi'^2 = J(phi) is checked without the model's kinematics.
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).parent))
-from servo_press_monolithic import SERVO_PRESS, TWO_PI, MonolithicServoPress  # noqa: E402
-
-from crankfmu.models.stephenson_press.stephenson_press import StephensonPress  # noqa: E402
+from crankfmu.models.stephenson_press.stephenson_press import StephensonPress
 from crankfmu.studies.papers import (base_link_inertia_printed, press_body_positions,
                                      press_kinetic_inertia)
+from tests.support.servo_press_monolithic import SERVO_PRESS, TWO_PI, MonolithicServoPress
 
 EFFECTS = ["gravity", "forging_load", "rod_inertia"]
 PHI = np.linspace(0.0, TWO_PI, 49)

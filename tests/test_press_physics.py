@@ -1,7 +1,7 @@
 """Physics of the servo press: kinematics, energy, the paper's analytic results vs the time domain.
 
 Every tolerance is stated with the figure measured when the test was written and why it is set
-where it is. The time-domain reference is the monolithic ODE of tests/servo_press_monolithic.py
+where it is. The time-domain reference is the monolithic ODE of tests/support/servo_press_monolithic.py
 (DcServoMotor + StephensonPress composed, solve_ivp at rtol 1e-10). The measured figures are
 collected in docs/stephenson_press_analysis.md.
 """
@@ -9,22 +9,17 @@ from __future__ import annotations
 
 import functools
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.optimize import minimize_scalar
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from servo_press_monolithic import (  # noqa: E402
-    SERVO_MOTOR, SERVO_PRESS, SERVO_U, TWO_PI, MonolithicServoPress)
-
-from crankfmu.studies import press_analysis as pa  # noqa: E402
-from crankfmu.runtime.model import ParameterError, held  # noqa: E402
-from crankfmu.models.dc_motor.dc_motor import DcServoMotor  # noqa: E402
-from crankfmu.models.stephenson_press.stephenson_press import G_STANDARD, StephensonPress  # noqa: E402
+from crankfmu.studies import press_analysis as pa
+from crankfmu.runtime.model import ParameterError, held
+from tests.support.servo_press_monolithic import (SERVO_MOTOR, SERVO_PRESS, SERVO_U, TWO_PI,
+                                                  MonolithicServoPress)
+from crankfmu.models.dc_motor.dc_motor import DcServoMotor
+from crankfmu.models.stephenson_press.stephenson_press import G_STANDARD, StephensonPress
 
 LAG = {False: (), True: ("electrical_lag",)}
 

@@ -1,6 +1,6 @@
 """The monolithic reference (crankfmu.reference): a scene's physics models composed into one ODE.
 
-Checked against the hand-built servo press reference (tests/servo_press_monolithic.py), closed
+Checked against the hand-built servo press reference (tests/support/servo_press_monolithic.py), closed
 forms (motor run-up of a constant inertia, two-mass oscillator), a conservation law and the mill
 stand's closed-form friction work, plus the errors for scenes that cannot be composed.
 """
@@ -18,7 +18,7 @@ from crankfmu.reference import ComposedModel, CompositionError, record_times, so
 from crankfmu.system.load import load_scene
 from crankfmu.system.scene import SceneError, parse_scene
 
-from servo_press_monolithic import MonolithicServoPress
+from tests.support.servo_press_monolithic import MonolithicServoPress
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"

@@ -18,7 +18,7 @@ composing the models through their hybrid contract) against independent solution
   and rod motion, and DOP853 at 1e-10 keeps the states to ~1e-9 over that span (measured 1.4e-9).
 * Every shipped scene composes (no CompositionError) and the conventional press (carrier rigidly
   on the press shaft, effect driven_crank) agrees with the rigid reference written for it in
-  tests/conventional_press_reference.py (a subclass of the drive that closes motor and press
+  tests/support/conventional_press_reference.py (a subclass of the drive that closes motor and press
   around it by hand, not through the generic composition) to 1e-7 relative in crank speed and
   lock times (both at rtol 1e-11; measured 1.6e-10 and 2e-15 s).
 """
@@ -27,8 +27,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import planetary_reference as R
-from conftest import SCENARIOS
+from tests.support import planetary_reference as R
+from tests.conftest import SCENARIOS
 from crankfmu.models.induction_motor.induction_motor import InductionMotor
 from crankfmu.models.planetary_drive.planetary_drive import PlanetaryClutchDrive, steady_state
 from crankfmu.models.rocker_impact.rocker_linear import exact_linear
@@ -115,7 +115,7 @@ def test_every_shipped_scene_composes():
 
 
 def test_conventional_press_against_hand_closed_rigid_reference():
-    import conventional_press_reference as C
+    from tests.support import conventional_press_reference as C
 
     stop = 0.9  # s: engagement, stroke, stop command and carrier lock of the first cycle
     sc = load_scene(SCENARIOS / "conventional_press.toml")

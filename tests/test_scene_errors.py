@@ -8,7 +8,7 @@ from crankfmu.system.scene import SceneError
 from crankfmu.system.load import load_scene
 from crankfmu.system.scene import apply_overrides
 
-from conftest import SCENARIOS
+from tests.conftest import SCENARIOS
 
 GOOD = (SCENARIOS / "servo_press.toml").read_text()
 

@@ -8,7 +8,7 @@ import pytest
 
 from crankfmu.cosim.runner import RunError, RunOptions, run_scene
 
-from servo_press_monolithic import MonolithicServoPress
+from tests.support.servo_press_monolithic import MonolithicServoPress
 
 TWO_PI = 2.0 * math.pi
 

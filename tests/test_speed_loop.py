@@ -27,7 +27,7 @@ from crankfmu.cosim.runner import RunOptions, run_scene
 from crankfmu.system.load import load_scene
 from crankfmu.system.scene import apply_overrides
 
-from conftest import SCENARIOS
+from tests.conftest import SCENARIOS
 
 G = 9.80665
 

@@ -21,7 +21,7 @@ from crankfmu.system.ssp_export import export_ssp, fmpy_parameter_set
 from crankfmu.system.ssp_load import load_ssp
 from crankfmu.system.ssp_export import NS, SSD_NAME
 
-from conftest import SCENARIOS
+from tests.conftest import SCENARIOS
 
 STOP = 0.05  # s: 50 steps of 1 ms, enough to pass the start-up transient's first 2 rad of motor
 
@@ -203,7 +203,7 @@ def test_libcosim_runs_the_archive_with_its_bindings(ssp, jacobi_reference):
 
 
 def test_ecos_runs_the_archive_with_its_bindings(scene, ssp, jacobi_reference):
-    from importer_support import require_ecospy
+    from tests.support.importer_support import require_ecospy
     require_ecospy()
     from ecospy.EcosSimulation import EcosSimulation
 

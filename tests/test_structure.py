@@ -15,8 +15,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from crankfmu.cli import main
 from crankfmu.studies.structure import (MechanismError, analyse, load_mechanism, loads_mechanism,
-                                        main, mechanism_from_dict, structure_report)
+                                        mechanism_from_dict, structure_report)
 
 MECH = Path(__file__).resolve().parents[1] / "scenarios" / "mechanisms"
 
@@ -172,10 +173,13 @@ def test_json_report_has_the_required_keys():
     assert d["redundant"]["count"] == 3 and len(d["redundant"]["directions"]) == 3
 
 
-def test_cli_main_prints_and_returns_codes(capsys):
-    assert main([str(MECH / "rssr.toml")]) == 0
+def test_cli_main_prints_and_returns_codes(capsys, tmp_path):
+    assert main(["structure", str(MECH / "rssr.toml")]) == 0
     assert "local: rod rotates about the line B–C" in capsys.readouterr().out
-    assert main([]) == 2
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[mechanism]\nname = 3\n")
+    assert main(["structure", str(bad)]) == 2  # a MechanismError: mapped by cli.main alone
+    assert capsys.readouterr().err.startswith("error: ")
 
 
 # -- errors ------------------------------------------------------------------------------------

@@ -12,7 +12,7 @@ from contextlib import redirect_stdout
 import numpy as np
 import pytest
 
-from conftest import SCENARIOS
+from tests.conftest import SCENARIOS
 
 FACTOR = r"([A-Za-z]+[0-9.]*|1)(\([0-9/]+\))?"
 FMI_UNIT = re.compile(rf"^(%|{FACTOR}([./]{FACTOR})*)$")

@@ -16,7 +16,6 @@ input; "master.step" and the other [master] keys go in `parameters` too (as with
 """
 from __future__ import annotations
 
-import copy
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -90,18 +89,9 @@ class Result:
         return df
 
 
-def structured(names, rows: np.ndarray) -> np.ndarray:
-    """fmpy's layout: a structured array with the field "time", then one per name."""
-    dtype = np.dtype([("time", np.float64)] + [(n, np.float64) for n in names])
-    out = np.empty(len(rows), dtype=dtype)
-    for k, name in enumerate(dtype.names):
-        out[name] = rows[:, k]
-    return out
-
-
 def _result(recorder, metadata: dict, files: dict, title: str, statistics=None,
             coupling_error=None, scene=None) -> Result:
-    from .cosim.results import column_units
+    from .cosim.results import column_units, structured
     from .cosim.runner import plot_roles
     return Result(structured(recorder.names, recorder.rows), column_units(recorder),
                   statistics if statistics is not None else metadata.get("statistics", {}),
@@ -117,46 +107,33 @@ def load_scene(scene):
     return _load(scene)
 
 
-def prepare(scene, *, stop_time=None, step=None, algorithm=None, extrapolation=None,
-            parameters=None, inputs=None):
+def prepare(scene, *, stop_time=None, step=None, algorithm=None, parameters=None, inputs=None,
+            **master_options):
     """A copy of `scene` (or the scene loaded from that path) with the settings applied and
-    checked as a scene file's would be."""
-    from .errors import MAX_TIME
-    from .system.scene import Scene, SceneError, _number, check_run_size, set_input, set_value
-    scene = copy.deepcopy(scene) if isinstance(scene, Scene) else load_scene(scene)
-    for ref, value in (parameters or {}).items():
-        set_value(scene, ref, value, f"parameters[{ref!r}]")
-    for ref, value in (inputs or {}).items():
-        set_input(scene, ref, value, f"inputs[{ref!r}]")
-    if stop_time is not None:
-        scene.stop_time = _number(scene.path, "stop_time", stop_time, minimum=-MAX_TIME,
-                                  maximum=MAX_TIME)
-        if scene.stop_time <= scene.start_time:
-            raise SceneError(scene.path, "stop_time", f"must exceed start_time = "
-                                                      f"{scene.start_time}")
-    for name, value in (("step", step), ("algorithm", algorithm),
-                        ("extrapolation", extrapolation)):
-        if value is not None:
-            set_value(scene, f"master.{name}", value, name)
-    check_run_size(scene)
-    return scene
+    checked as a scene file's would be (crankfmu.system.load.prepare_scene). `master_options`:
+    the masters' own options as keyword arguments (extrapolation=2, tolerance=1e-4, min_step=...,
+    as each master declares them: crankfmu.masters.MASTERS[name].options)."""
+    from .system.load import prepare_scene
+    return prepare_scene(scene, stop_time=stop_time, step=step, algorithm=algorithm,
+                         parameters=parameters, inputs=inputs, **master_options)
 
 
-def simulate(scene, *, stop_time=None, step=None, algorithm=None, extrapolation=None,
-             parameters=None, inputs=None, out=None, progress=False, plot=False,
-             fmu_dir=None, log=False, estimate=True, target=None) -> Result:
+def simulate(scene, *, stop_time=None, step=None, algorithm=None, parameters=None,
+             inputs=None, out=None, progress=False, plot=False, fmu_dir=None, log=False,
+             estimate=True, target=None, **master_options) -> Result:
     """Co-simulate the scene with its master (crankfmu.cosim.runner.run_scene) and return the
     recorded values. `out`: a CSV path to write (the JSON sidecar beside it, and with
     `plot=True` a PNG); nothing is written without it. `fmu_dir`: the built FMUs (default:
     fmus/ beside the scene's scenarios/ folder, else the package's build folder; stale or
-    missing FMUs are built there, never into the working folder). `estimate`: run the
-    companions of the error estimate (Result.estimated_error; about 0.75 x the run's cost).
-    `target` (or the scene's [master].target): the global error wanted; master, extrapolation
-    and step are chosen from the estimate (crankfmu.cosim.target); raises
-    crankfmu.cosim.target.TargetNotMet saying why when no setting meets it."""
+    missing FMUs are built there, never into the working folder). `master_options`: the
+    chosen master's own options (extrapolation=2, tolerance=1e-4, ...; see `prepare`).
+    `estimate`: run the companions of the error estimate (Result.estimated_error; about 0.75 x
+    the run's cost). `target` (or the scene's [master].target): the global error wanted;
+    master, extrapolation and step are chosen from the estimate (crankfmu.cosim.target);
+    raises crankfmu.cosim.target.TargetNotMet saying why when no setting meets it."""
     from .cosim.runner import RunOptions, run_scene
     scene = prepare(scene, stop_time=stop_time, step=step, algorithm=algorithm,
-                    extrapolation=extrapolation, parameters=parameters, inputs=inputs)
+                    parameters=parameters, inputs=inputs, **master_options)
     if target is not None:
         set_value(scene, "master.target", target, "target")
     if scene.master.target is not None:

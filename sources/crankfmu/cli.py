@@ -31,14 +31,16 @@ def add_step_option(p: argparse.ArgumentParser, help: str = "communication step 
 def add_master_options(p: argparse.ArgumentParser) -> None:
     """How the master runs the scene (run, export-ssp)."""
     add_step_option(p)
-    from .cosim.masters import MASTERS
+    from .masters import MASTERS, all_options
     p.add_argument("--algorithm", choices=sorted(MASTERS),
                    help="master algorithm ([master].algorithm)")
-    p.add_argument("--extrapolation", type=int, choices=(0, 1, 2),
-                   help="input extrapolation order: polynomial through the last 1, 2, 3 "
-                        "communication points ([master].extrapolation)")
-    p.add_argument("--tolerance", type=float,
-                   help="the iterative and adaptive masters' tolerance ([master].tolerance)")
+    for option in all_options().values():  # each master's own options, from its declaration
+        takers = [n for n, c in MASTERS.items() if option in c.options]
+        p.add_argument(f"--{option.name.replace('_', '-')}", type=option.kind,
+                       choices=option.choices, dest=f"master_{option.name}",
+                       metavar=None if option.choices else option.name.upper(),
+                       help=f"{option.describe()} (masters: {', '.join(takers)}; "
+                            f"[master].{option.name})")
     p.add_argument("--fmu-tolerance", type=float,
                    help="each FMU's internal relative tolerance ([master].fmu_tolerance)")
     p.add_argument("--max-steps", type=int, help="the most communication steps the run may take "
@@ -92,7 +94,7 @@ def load_with_options(args):
                                   minimum=-MAX_TIME, maximum=MAX_TIME)
         if scene.stop_time <= scene.start_time:
             raise SceneError(scene.path, "--stop-time", f"must exceed start_time = {scene.start_time}")
-    for key in ("step", "tolerance", "fmu_tolerance"):
+    for key in ("step", "fmu_tolerance"):
         value = getattr(args, key, None)
         if value is not None:
             setattr(m, key, _number(scene.path, f"--{key.replace('_', '-')}", value,
@@ -102,10 +104,20 @@ def load_with_options(args):
                                maximum=10**12)
     if getattr(args, "algorithm", None):
         m.algorithm = args.algorithm
-    if getattr(args, "extrapolation", None) is not None:
-        m.extrapolation = args.extrapolation
+    _master_options_from(args, scene)
     check_run_size(scene, "--step" if getattr(args, "step", None) is not None else "[master].step")
     return scene
+
+
+def _master_options_from(args, scene) -> None:
+    """--extrapolation, --tolerance, ...: the options the masters declare, each checked
+    against its declaration (a master that does not take one ignores it)."""
+    from .masters import all_options
+    from .system.scene import set_value
+    for name in all_options():
+        value = getattr(args, f"master_{name}", None)
+        if value is not None:
+            set_value(scene, f"master.{name}", value, f"--{name.replace('_', '-')}")
 
 
 def cmd_run(args) -> int:
@@ -136,20 +148,25 @@ def _run_target(scene, out: Path, args) -> int:
         return 1
     write_chosen(scene, result, report, out, args.plot)
     m = result.metadata["master"]
+    knob = f"tolerance {report.tolerance:g}" if m["step"] != report.step or \
+        m["algorithm"] == "adaptive" else f"step {m['step']:g} s"
     print(f"{scene.name}: target {report.target:g} met by {m['algorithm']}, extrapolation "
-          f"{m['extrapolation']}, " + (f"tolerance {report.tolerance:g}" if
-                                       m["algorithm"] == "adaptive" else f"step {m['step']:g} s")
-          + f"; the search ran {len(report.runs)} runs in {report.wall_seconds:.2f} s wall")
+          f"{m.get('extrapolation')}, {knob}; the search ran {len(report.runs)} runs in "
+          f"{report.wall_seconds:.2f} s wall")
     _print_run(scene, result, report.estimate)
     return 0
 
 
 def _print_run(scene, result, estimate=None) -> None:
     from .cosim.estimate import format_estimate
+    from .masters import MASTERS
     m = result.metadata.get("master", {})  # the run's setting (--target chooses it)
-    size = "variable steps" if m["algorithm"] == "adaptive" else f"steps of {m['step']:g} s"
-    print(f"{scene.name}: {result.steps} {size} with {m['algorithm']} (extrapolation "
-          f"{m['extrapolation']}) in {result.wall_seconds:.2f} s wall")
+    cls = MASTERS[m["algorithm"]]
+    size = "variable steps" if cls.variable_step else f"steps of {m['step']:g} s"
+    own = ", ".join(f"{o.name} {m[o.name]:g}" for o in cls.options if o.name in m)
+    print(f"{scene.name}: {result.steps} {size} with {m['algorithm']}" + (f" ({own})" if own
+                                                                           else "")
+          + f" in {result.wall_seconds:.2f} s wall")
     for name, st in result.statistics.items():
         print(f"  {name}: {st['doStep_calls']} doStep calls, {st['doStep_seconds']:.3f} s, "
               f"{st['rollbacks']} rollbacks")

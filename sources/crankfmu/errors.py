@@ -30,3 +30,7 @@ class SceneError(CrankfmuError, ValueError):
     def __init__(self, path, key: str, message: str):
         self.path, self.key = path, key
         super().__init__(f"{path}: {key}: {message}")
+
+
+class OptionError(CrankfmuError, ValueError):
+    """A command-line option, an API argument or a master option outside what it allows."""

@@ -78,10 +78,8 @@ def register(sub) -> None:
 
 
 def run_accuracy_command(args) -> int:
-    from ..studies.accuracy import (AccuracyOptions, MetricError, format_orders, format_table,
-                                    run_accuracy)
+    from ..studies.accuracy import AccuracyOptions, format_orders, format_table, run_accuracy
     from ..cli import load_with_options
-    from ..reference import CompositionError
 
     scene = load_with_options(args)
     options = AccuracyOptions(
@@ -97,15 +95,8 @@ def run_accuracy_command(args) -> int:
         estimate=not args.no_estimate)
     if args.tolerances:
         options.tolerances = args.tolerances
-    problem = _check_options(options)
-    if problem:
-        print(f"error: {problem}", file=sys.stderr)
-        return 2
-    try:
-        result = run_accuracy(scene, options)
-    except (CompositionError, MetricError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+    _check_options(options)
+    result = run_accuracy(scene, options)
     from ..studies.accuracy.report import format_events
     print(f"{scene.name}: error = {result.metric.describe()}")
     print(f"reference: {result.reference_csv}" + (" (cached)" if result.reference_cached else ""))
@@ -149,22 +140,24 @@ def _printer():
     return report
 
 
-def _check_options(o) -> str | None:
-    from ..cosim.masters import MASTERS
+def _check_options(o) -> None:
+    """Raises OptionError naming the option and what it allows."""
+    from ..masters import MASTERS
+    from ..errors import OptionError
 
     unknown = [a for a in o.algorithms or [] if a not in MASTERS]
     if unknown:
-        return f"--algorithms: {', '.join(unknown)} not available; available: {', '.join(MASTERS)}"
+        raise OptionError(f"--algorithms: {', '.join(unknown)} not available; available: "
+                          f"{', '.join(MASTERS)}")
     if any(x not in (0, 1, 2) for x in o.extrapolations):
-        return f"--extrapolations: {o.extrapolations}: each must be 0, 1 or 2"
+        raise OptionError(f"--extrapolations: {o.extrapolations}: each must be 0, 1 or 2")
     for name, values in (("--steps", o.steps), ("--tolerances", o.tolerances),
                          ("--fmu-tolerances", o.fmu_tolerances), ("--target", [o.target]),
                          ("--rtol", [o.reference_rtol])):
         if any(not v > 0 for v in values or []):
-            return f"{name}: every value must be > 0, got {values}"
+            raise OptionError(f"{name}: every value must be > 0, got {values}")
     if o.cycles < 1:
-        return f"--cycles must be >= 1, got {o.cycles}"
-    return None
+        raise OptionError(f"--cycles must be >= 1, got {o.cycles}")
 
 
 def _print_choice(what: str, o, target: float) -> None:

@@ -2,7 +2,6 @@
 tight tolerance, written in the CSV layout of `crankfmu run` (same record grid)."""
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 
@@ -29,19 +28,15 @@ def register(sub) -> None:
 def run_reference_command(args) -> int:
     from ..cli import load_with_options
     from ..cosim.results import plot
-    from ..reference import CompositionError, solve_reference, write_reference
+    from ..errors import OptionError
+    from ..reference import solve_reference, write_reference
 
     scene = load_with_options(args)
     if args.rtol <= 0:
-        print("error: --rtol must be > 0", file=sys.stderr)
-        return 2
+        raise OptionError(f"--rtol must be > 0, got {args.rtol}")
     out = args.out or Path("results") / f"{scene.name}_reference.csv"
-    try:
-        result = solve_reference(scene, rtol=args.rtol, method=args.method,
-                                 progress=False if args.no_progress else None)
-    except CompositionError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+    result = solve_reference(scene, rtol=args.rtol, method=args.method,
+                             progress=False if args.no_progress else None)
     write_reference(scene, out, result)
     print(f"{scene.name} reference: {result.method} at rtol {result.rtol:g}, "
           f"{result.rhs_calls} right-hand side calls, {result.wall_seconds:.2f} s wall")

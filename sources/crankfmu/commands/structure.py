@@ -13,6 +13,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..studies.structure.report import main
+    from ..studies.structure.report import structure_report
 
-    return main([str(args.mechanism)] + (["--json"] if args.json else []))
+    print(structure_report(args.mechanism, args.json))
+    return 0

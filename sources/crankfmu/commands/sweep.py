@@ -47,23 +47,16 @@ def register(sub) -> None:
 
 
 def run_sweep(args) -> int:
-    import sys
-
-    from ..studies.sweep import SweepError, sweep
-
+    from ..studies.sweep import sweep
     from ..system.load import load_scene
 
     out = args.out
     if out is None:
         out = Path("results") / f"{load_scene(args.scene).name}_sweep"
-    try:
-        table = sweep(args.scene, args.vary, out, jobs=args.jobs, scheduler=args.scheduler,
-                      stop_time=args.stop_time, from_time=args.from_time, samples=args.samples,
-                      seed=args.seed, overrides=args.overrides, fmu_dir=args.fmus,
-                      progress=False if args.no_progress else None, plot=not args.no_plot)
-    except SweepError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+    table = sweep(args.scene, args.vary, out, jobs=args.jobs, scheduler=args.scheduler,
+                  stop_time=args.stop_time, from_time=args.from_time, samples=args.samples,
+                  seed=args.seed, overrides=args.overrides, fmu_dir=args.fmus,
+                  progress=False if args.no_progress else None, plot=not args.no_plot)
     bad = [r for r in table.rows if r["status"] != "completed"]
     print(f"{len(table)} runs ({table.executed} executed now, {len(table) - table.executed} "
           f"kept from {table.csv}); {len(table) - len(bad)} completed")

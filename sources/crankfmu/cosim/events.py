@@ -21,13 +21,15 @@ elsewhere) can be compared, and an error estimate can evaluate the same figure.
 """
 from __future__ import annotations
 
+from ...errors import CrankfmuError
+
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
 
-class EventSpecError(ValueError):
+class EventSpecError(CrankfmuError, ValueError):
     """An [analysis].events entry that is not one of the allowed forms; names key and value."""
 
 

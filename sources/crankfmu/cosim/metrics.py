@@ -19,6 +19,8 @@ so sampling effects are the same on both sides and only the coupling error remai
 """
 from __future__ import annotations
 
+from ...errors import CrankfmuError
+
 import math
 from dataclasses import dataclass
 
@@ -30,7 +32,7 @@ TWO_PI = 2.0 * math.pi
 METRICS = ("max", "steady", "events")
 
 
-class MetricError(ValueError):
+class MetricError(CrankfmuError, ValueError):
     """A metric that cannot be evaluated on this scene; says what is missing."""
 
 

@@ -283,3 +283,12 @@ def plot(path: Path, recorder: Recorder, title: str, roles: dict | None = None,
     else:
         fig = figure(recorder.names, recorder.units, recorder.rows, title)
     fig.savefig(path, dpi=110)
+
+
+def structured(names, rows: np.ndarray) -> np.ndarray:
+    """fmpy's layout: a structured array with the field "time", then one per name."""
+    dtype = np.dtype([("time", np.float64)] + [(n, np.float64) for n in names])
+    out = np.empty(len(rows), dtype=dtype)
+    for k, name in enumerate(dtype.names):
+        out[name] = rows[:, k]
+    return out

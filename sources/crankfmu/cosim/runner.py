@@ -15,7 +15,7 @@ from lxml import etree
 from ..errors import CrankfmuError, InterruptedRun
 from ..system.scene import Scene, SceneError, check_run_size
 from ..fmu.instance import FmuInstance, LogCollector
-from .masters import MASTERS, DivergenceError, make_master
+from ..masters import MASTERS, DivergenceError, OptionError, make_master
 from .results import (Recorder, column_units, normalize_unit, plot, versions, write_csv,
                       write_sidecar)
 from ..system.wiring import (System, check_components, check_links, check_loops, check_physics,
@@ -183,6 +183,9 @@ def run_scene(scene: Scene, options: RunOptions | None = None) -> RunResult:
         system = System(scene, fmus, links)
         try:
             master = make_master(scene.master.algorithm, system, scene.master)
+        except OptionError as err:  # an option set in code, checked against its declaration
+            key, _, message = str(err).partition(": ")
+            raise SceneError(scene.path, key, message) from None
         except ValueError as err:  # e.g. an FMU that cannot roll back, for a master that must
             raise SceneError(scene.path, "[master]", str(err)) from None
         check_loops(scene, fmus, links, master)
@@ -251,10 +254,7 @@ def _run(scene, options, out, log, fmus, system, master, recorder, readers, inte
         "outcome": outcome or "completed", "rows": recorder.count,
         "units": column_units(recorder),
         "start_time": t0, "stop_time": scene.stop_time,
-        "master": {"algorithm": m.algorithm, "step": h, "extrapolation": m.extrapolation,
-                   "tolerance": m.tolerance, "fmu_tolerance": m.fmu_tolerance,
-                   "max_iterations": m.max_iterations, "min_step": m.min_step,
-                   "max_step": m.max_step, "max_steps": m.max_steps, "order": system.order},
+        "master": {**m.resolved(), "step": h, "order": system.order},  # its declared options
         "components": {n: {"fmu": str(f.path), "parameters": scene.components[n].parameters,
                            "effects": scene.components[n].effects} for n, f in fmus.items()},
         "versions": versions(), "wall_seconds": wall, "cpu_seconds": cpu,
@@ -346,15 +346,16 @@ def _variable_steps(master, scene: Scene, progress):
     [record].interval after the last row (every accepted point without an interval), and at
     stop_time. A step that would leave less than min_step before stop_time is stretched to it."""
     t, stop = scene.start_time, scene.stop_time
+    min_step = scene.master.min_step  # a variable-step master's declared option
     interval = scene.record_interval or 0.0
     last_row, step = t, 0
     bar = _progress(None, progress, scene.name, total=stop - t)
     while t < stop:
         h = master.next_step
-        if t + h > stop - scene.master.min_step:
+        if t + h > stop - min_step:
             h = stop - t
         taken = master.step(t, h)
-        t_new = stop if taken == h and t + h >= stop - scene.master.min_step else t + taken
+        t_new = stop if taken == h and t + h >= stop - min_step else t + taken
         step += 1
         if bar is not None:
             bar.update(t_new - t)

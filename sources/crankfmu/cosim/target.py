@@ -74,7 +74,7 @@ def candidates(scene) -> list[tuple[str, int]]:
 def search(scene, target: float, fmu_dir=None):
     """(RunResult of the chosen run with its estimate, TargetReport); raises TargetNotMet
     with the report's reasons when no candidate meets the target."""
-    from .masters import MASTERS
+    from ..masters import MASTERS
     if not (target > 0 and math.isfinite(target)):
         raise ValueError(f"--target must be a positive number, got {target!r}")
     scene = with_metric_record(scene)

@@ -42,6 +42,8 @@ declare it either (their discrete update would be skipped).
 """
 from __future__ import annotations
 
+from ..errors import CrankfmuError
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -58,7 +60,7 @@ EXACT_ADVANCE = {"rotor.LinearModel"}
 STIFF_RATE = 1e4  # 1/s: fastest eigenvalue above which the composed ODE is solved by Radau
 
 
-class CompositionError(ValueError):
+class CompositionError(CrankfmuError, ValueError):
     """The scene cannot be composed into one ODE; names the component (or loop) and why."""
 
 

@@ -16,6 +16,10 @@ Class attributes
     inputs       tuple of `Variable`; `start` is the value used when nothing is connected.
     outputs      tuple of `Variable`; `depends_on` lists the inputs with direct feedthrough.
 
+Derived for every subclass from those declarations (`PhysicsModel.__init_subclass__`):
+    IN, OUT      the position of each input and output by name, read as `u[self.IN.flange_w]`
+                 (a namedtuple of ints: one C-level attribute read, no index kept by hand).
+
 Methods
     check(p)                       raise `ParameterError` for impossible parameter values.
     state_names()                  names of the continuous states *for the enabled effects*:
@@ -59,7 +63,9 @@ in `integrator` (solver = "scipy": the cross-check; the FMU parameter `scipy_sol
 """
 from __future__ import annotations
 
+import keyword
 import math
+from collections import namedtuple
 from dataclasses import dataclass
 from types import SimpleNamespace
 from typing import Callable, Sequence
@@ -122,6 +128,25 @@ class Effect:
     default: bool = False
 
 
+def name_indices(owner: str, kind: str, names: Sequence[str]):
+    """The position of each name, as attributes of a namedtuple of ints (so a model reads
+    `u[self.IN.shaft_w]`, not `u[2]`: one C-level attribute read). Raises TypeError naming the
+    class and the name when it cannot be an attribute (not an identifier, a leading underscore,
+    a keyword) or is declared twice."""
+    names = list(names)
+    for name in names:
+        if not name.isidentifier() or keyword.iskeyword(name) or name.startswith("_") or \
+                names.count(name) > 1:
+            raise TypeError(f"{owner}: {kind} {name!r} must be a unique Python identifier "
+                            f"without a leading underscore")
+    return namedtuple(f"{owner}{kind.capitalize()}s", names)(*range(len(names)))
+
+
+def variable_indices(owner: str, kind: str, variables: Sequence[Variable]):
+    """`name_indices` of declared variables (`kind`: "input" or "output")."""
+    return name_indices(owner, kind, [v.name for v in variables])
+
+
 class PhysicsModel:
     """Base class; see the module docstring for the contract."""
 
@@ -146,6 +171,15 @@ class PhysicsModel:
     # advance() overridden only to run the hybrid contract (on_input_change, event_functions,
     # monitor_functions/observe): see the module docstring; the monolithic reference relies on it
     advance_follows_contract: bool = False
+
+    IN = variable_indices("PhysicsModel", "input", ())
+    OUT = variable_indices("PhysicsModel", "output", ())
+
+    def __init_subclass__(cls, **kwargs):
+        """Derive the name -> position tables IN and OUT from the class's declarations."""
+        super().__init_subclass__(**kwargs)
+        cls.IN = variable_indices(cls.__name__, "input", cls.inputs)
+        cls.OUT = variable_indices(cls.__name__, "output", cls.outputs)
 
     def __init__(self, parameters: dict | None = None, effects: Sequence[str] | dict | None = None):
         values = {v.name: float(v.start) for v in self.parameters}
@@ -240,6 +274,19 @@ class PhysicsModel:
 
     def output_index(self, name: str) -> int:
         return [v.name for v in self.outputs].index(name)
+
+    def output_vector(self, values: dict) -> list:
+        """The outputs in declaration order from a dict by name, for a model that builds many
+        outputs (a long positional list is as unclear as u[2]). KeyError naming the model and
+        the outputs it misses or does not declare."""
+        names = self.OUT._fields
+        if len(values) == len(names):
+            try:
+                return [values[name] for name in names]
+            except KeyError:
+                pass
+        missing, extra = sorted(set(names) - set(values)), sorted(set(values) - set(names))
+        raise KeyError(f"{self.model_name}: output values missing {missing}, undeclared {extra}")
 
     def step(self, t0: float, x0, h: float, u_of_t: InputFunction, rtol: float, atol) -> list:
         """`advance` under one work limit for the whole step (what the FMU calls): at most

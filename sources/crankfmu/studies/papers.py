@@ -76,6 +76,16 @@ def press_body_positions(press, phi: float) -> dict:
             "C": C, "psi": psi}
 
 
+def simulated(scene, **settings) -> np.ndarray:
+    """The scene co-simulated with its master (settings as crankfmu.system.load.prepare_scene
+    takes them): fmpy's structured array, "time" then "comp.var"."""
+    from ..cosim.results import structured
+    from ..cosim.runner import RunOptions, run_scene
+    from ..system.load import prepare_scene
+    result = run_scene(prepare_scene(scene, **settings), RunOptions(progress=False))
+    return structured(result.recorder.names, result.recorder.rows)
+
+
 def press_kinetic_inertia(press, phi, J_input: float = 0.0, h: float = 1e-5):
     """(J(phi), J_2O(phi)) [kg m^2] as 2 T/phi'^2: the kinetic energy T of every body at unit
     crank speed, the velocities by central differences (step h [rad]) of the positions of
@@ -354,17 +364,17 @@ def press_figures(scene, out_dir: Path) -> list[Path]:
 def impact_data(scene) -> dict:
     """Run the scene (RockerImpact with the linearised stiffnesses it records) and evaluate the
     first and second approximations and the exact linear solution at the stiffnesses used."""
-    from .. import api
+    from ..system.load import load_scene
     from . import rocker_analysis as ra
 
-    sc = api.load_scene(scene)
+    sc = load_scene(scene)
     comp = next((c.name for c in sc.components.values() if c.fmu == "RockerImpact"), None)
     if comp is None:
         _component(sc, "impact", "RockerImpact")   # raises: no such component
     for var in ("P", "T", "c_contact_used", "c_support_used"):
         if f"{comp}.{var}" not in sc.record:
             raise SceneError(sc.path, "record.variables", f"the figure needs {comp}.{var}")
-    v = api.simulate(sc, estimate=False).values
+    v = simulated(sc)
     c, c0 = float(v[f"{comp}.c_contact_used"][0]), float(v[f"{comp}.c_support_used"][0])
     params = sc.components[comp].parameters
     data = ra.RockerData(**{k: float(params[k]) for k in ("J", "m", "r", "S", "R_c", "d", "E",
@@ -460,7 +470,7 @@ def planetary_closed_form(d: dict, c0: float, c1: float, scene: str, w_a0: float
     (the held member at rest), with the linear motor law. Each phase (fixed lock/slide pattern)
     is linear time-invariant in z = (w_b, w_h, e_b, e_h, 1), e_k the brakes' exponentials:
     z(t) = expm(A t) z(t_i); break-free and lock are roots of linear functionals of z (brentq on
-    the exact expm). The same construction as tests/planetary_reference.py's `closed_form`,
+    the exact expm). The same construction as tests/support/planetary_reference.py's `closed_form`,
     extended by the speeds on a grid and the brake energies (trapezoidal rule on the grid,
     n intervals per phase: relative error ~1e-6). Units SI; d holds the drive's parameters."""
     from scipy.optimize import brentq
@@ -559,11 +569,11 @@ def planetary_setup(scene_path):
     """(scene with the motor's linear law and the idle start speed of that law, drive parameters,
     c0, c1, idle w_a). The linear law makes the simulation and the closed form the same
     equations, so they can be compared to the co-simulation's accuracy."""
-    from .. import api
     from ..models.induction_motor.induction_motor import InductionMotor
     from ..models.planetary_drive.planetary_drive import PlanetaryClutchDrive, steady_state
+    from ..system.load import load_scene
 
-    scene = api.load_scene(scene_path)
+    scene = load_scene(scene_path)
     motor_c = _component(scene, "motor", "InductionMotor")
     _component(scene, "drive", "PlanetaryClutchDrive")
     for var in ("w_a", "w_b", "w_h", "E_brake_b", "E_brake_h", "period", "t_lock_b", "t_lock_h"):
@@ -604,14 +614,14 @@ def brake_torque_for_engagement_time(d: dict, c0: float, c1: float, w_idle: floa
 def planetary_data(scene_path) -> dict:
     """The four-period run and the closed forms beside it; engagement time against alpha_b and
     the brake torque for a given engagement time, closed form and simulated."""
-    from .. import api
+    from ..system.load import prepare_scene
     from ..system.scene import InputSignal
 
     scene, d, c0, c1, w_idle = planetary_setup(scene_path)
-    four = api.prepare(scene, stop_time=T_STOP)
+    four = prepare_scene(scene, stop_time=T_STOP)
     four.inputs["drive.command"] = InputSignal("drive.command", [0.0, T_COMMAND_ON,
                                                T_COMMAND_OFF], [0.0, 1.0, 0.0], "step")
-    v = api.simulate(four, estimate=False).values
+    v = simulated(four)
     t = v["time"]
     k_off = int(np.argmin(np.abs(t - T_COMMAND_OFF)))
     engage = planetary_closed_form(d, c0, c1, "engage", w_idle, 0.0, T_COMMAND_OFF - T_COMMAND_ON)
@@ -621,15 +631,15 @@ def planetary_data(scene_path) -> dict:
     sims = {d["alpha_b"]: float(v["drive.t_lock_b"][-1]) - T_COMMAND_ON}  # the four-period run
     for a in PLANETARY_ALPHAS:
         t_cf = planetary_engagement_time({**d, "alpha_b": a}, c0, c1, w_idle)
-        r = api.simulate(scene, stop_time=t_cf + 0.01, step=SWEEP_STEP,
-                         parameters={"drive.alpha_b": a}, estimate=False).values
+        r = simulated(scene, stop_time=t_cf + 0.01, step=SWEEP_STEP,
+                         parameters={"drive.alpha_b": a})
         sims[a] = float(r["drive.t_lock_b"][-1])
     targets = np.linspace(0.15, 0.45, 13)
     Mp_check = [brake_torque_for_engagement_time(d, c0, c1, w_idle, x) for x in PLANETARY_TARGETS]
     t_check = []
     for Mp, x in zip(Mp_check, PLANETARY_TARGETS):
-        r = api.simulate(scene, stop_time=x + 0.01, step=SWEEP_STEP,
-                         parameters={"drive.Mp_b": Mp}, estimate=False).values
+        r = simulated(scene, stop_time=x + 0.01, step=SWEEP_STEP,
+                         parameters={"drive.Mp_b": Mp})
         t_check.append(float(r["drive.t_lock_b"][-1]))
     return {"sim": {k: v[k] for k in ("time", "drive.w_a", "drive.w_b", "drive.w_h",
                                       "drive.E_brake_b", "drive.E_brake_h", "drive.period",

@@ -22,6 +22,8 @@ DIR/sweep.png plots each figure against each varied parameter.
 """
 from __future__ import annotations
 
+from ..errors import CrankfmuError
+
 import copy
 import csv
 import dataclasses
@@ -40,7 +42,7 @@ TAIL = ("status", "reason", "wall_seconds")
 RERUN = ("lost",)  # statuses a resumed sweep runs again
 
 
-class SweepError(ValueError):
+class SweepError(CrankfmuError, ValueError):
     pass
 
 

@@ -1,12 +1,14 @@
 """The scene file (TOML): what to simulate, wired how, run by which master, recording what.
 
     [scene]       name, description, start_time [s], stop_time [s]
-    [master]      algorithm, step [s], extrapolation (0, 1, 2), order, fmu_tolerance (each FMU's
-                  internal relative tolerance, via fmi2SetupExperiment), tolerance (the iterative
-                  and adaptive masters' own tolerance), max_iterations, min_step [s], max_step [s],
-                  max_steps (the most communication steps a run may take; default
-                  crankfmu.errors.MAX_STEPS: a step that would need more is refused up front),
-                  target (a requested global error: `crankfmu run` chooses the setting)
+    [master]      algorithm, step [s], order, fmu_tolerance (each FMU's internal relative
+                  tolerance, via fmi2SetupExperiment), max_steps (the most communication steps a
+                  run may take; default crankfmu.errors.MAX_STEPS: a step that would need more is
+                  refused up front), and the chosen algorithm's own options, as its master
+                  declares them (crankfmu.masters: extrapolation; tolerance,
+                  max_iterations for iterative; tolerance, min_step [s], max_step [s] for
+                  adaptive; `crankfmu run --help` lists them); target (a requested global
+                  error: `crankfmu run` then chooses master, extrapolation and step)
     [components.NAME]  fmu = "DcServoMotor" (built FMU name) or "path/to/file.fmu",
                        parameters = {name = value}, effects = ["name", ...]
     [[connections]]    from = "comp.output", to = "comp.input"
@@ -34,7 +36,6 @@ import numpy as np
 
 from ..errors import MAX_NAME_LENGTH, MAX_STEPS, MAX_TIME, SceneError
 
-ALGORITHMS = ("gauss-seidel", "jacobi", "iterative", "adaptive")
 TOP_LEVEL_KEYS = {"scene", "master", "components", "connections", "inputs", "record", "swap",
                   "analysis"}
 
@@ -78,21 +79,65 @@ class InputSignal:
         return float(np.interp(t, self.times, self.values))
 
 
-@dataclass
+COMMON_MASTER_KEYS = ("algorithm", "step", "fmu_tolerance", "order", "max_steps", "target")
+
+
+@dataclass(eq=False)
 class Master:
+    """The [master] table: the keys every master shares, and `options`, the values given for
+    the masters' own options (extrapolation, tolerance, ...: declared by each master class in
+    crankfmu.masters). An option reads as an attribute (`m.tolerance`): the value given,
+    else the chosen master's declared default; setting one (`m.tolerance = 1e-4`) stores it
+    unchecked (the master checks it when the run starts, the scene reader and `set_value` before)."""
     algorithm: str = "gauss-seidel"
     step: float = 1e-3
-    extrapolation: int = 0
-    tolerance: float = 1e-6       # iterative/adaptive masters: interface convergence / step error
     fmu_tolerance: float = 1e-8   # each FMU's internal solver (fmi2SetupExperiment)
     order: list[str] = field(default_factory=list)
-    max_iterations: int = 20
-    min_step: float = 1e-6
-    max_step: float = 1e-2
     max_steps: int = MAX_STEPS    # communication steps a run may take (checked before it starts)
-    # the requested global error (scene's accuracy metric): `crankfmu run` then chooses master,
-    # extrapolation and step from the error estimate (crankfmu.cosim.target); None: as given
+    # the requested global error (the scene's accuracy metric): `crankfmu run` then chooses
+    # master, extrapolation and step from the error estimate (crankfmu.cosim.target)
     target: float | None = None
+    options: dict = field(default_factory=dict)
+
+    def __getattr__(self, name: str):
+        if name.startswith("_"):
+            raise AttributeError(name)
+        options = self.__dict__.get("options", {})
+        if name in options:
+            return options[name]
+        declared = _master_options().get(name)
+        if declared is None:
+            raise AttributeError(f"[master] has no key {name!r}")
+        return declared.default
+
+    def __setattr__(self, name: str, value) -> None:
+        if name in self.__dataclass_fields__:
+            object.__setattr__(self, name, value)
+        elif name in _master_options():
+            self.options[name] = value
+        else:
+            raise AttributeError(f"[master] has no key {name!r}")
+
+    def resolved(self) -> dict:
+        """The common keys and the chosen master's options (given or default): what the run
+        uses (the sidecar's "master" table, SSP export)."""
+        from ..masters import MASTERS
+        cls = MASTERS.get(self.algorithm)
+        own = {o.name: getattr(self, o.name) for o in (cls.options if cls else ())}
+        return {"algorithm": self.algorithm, "step": self.step, **own,
+                "fmu_tolerance": self.fmu_tolerance, "max_steps": self.max_steps,
+                "order": list(self.order)}
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, Master) and self.resolved() == other.resolved()
+
+
+def _master_options() -> dict:
+    """Every option some master declares, by key. The one place the scene reader consults the
+    master registry (crankfmu.masters): which keys [master] takes depends on which
+    masters exist."""
+    from ..masters import all_options
+    return all_options()
 
 
 @dataclass
@@ -192,34 +237,72 @@ def _variable_ref(path, key, value, components) -> str:
 
 
 def _parse_master(path, raw: dict) -> Master:
+    """[master]: the common keys, then exactly the chosen master's own options."""
+    from ..masters import OptionError, master_class
     m = Master()
-    _only_keys(path, "[master]", raw, set(Master.__dataclass_fields__))
     if "algorithm" in raw:
-        if not isinstance(raw["algorithm"], str) or raw["algorithm"] not in ALGORITHMS:
-            raise SceneError(path, "[master].algorithm",
-                             f"{_show(raw['algorithm'])} is not one of {', '.join(ALGORITHMS)}")
+        try:
+            master_class(raw["algorithm"])
+        except OptionError as err:
+            raise SceneError(path, "[master].algorithm", str(err)) from None
         m.algorithm = raw["algorithm"]
-    for key in ("step", "min_step", "max_step"):
-        if key in raw:
-            setattr(m, key, _number(path, f"[master].{key}", raw[key], positive=True))
-    for key in ("tolerance", "fmu_tolerance", "target"):  # relative tolerances and errors
-        if key in raw:
-            setattr(m, key, _number(path, f"[master].{key}", raw[key], positive=True,
-                                    maximum=1.0))
-    if "extrapolation" in raw:
-        if isinstance(raw["extrapolation"], bool) or raw["extrapolation"] not in (0, 1, 2):
-            raise SceneError(path, "[master].extrapolation",
-                             f"must be 0, 1 or 2, got {_show(raw['extrapolation'])}")
-        m.extrapolation = int(raw["extrapolation"])
-    if "max_iterations" in raw:
-        m.max_iterations = _integer(path, "[master].max_iterations", raw["max_iterations"],
-                                    minimum=1, maximum=10_000)
+    cls = master_class(m.algorithm)
+    own = {o.name: o for o in cls.options}
+    unknown = set(raw) - set(COMMON_MASTER_KEYS) - set(own)
+    if unknown:
+        key = sorted(unknown)[0]
+        raise SceneError(path, f"[master].{key}", _not_an_option(m.algorithm, key, own))
+    _parse_common_master_keys(path, raw, m)
+    for name, option in own.items():
+        if name in raw:
+            m.options[name] = _master_option(path, f"[master].{name}", option, raw[name])
+    _check_between_options(path, m)
+    return m
+
+
+def _not_an_option(algorithm: str, key: str, own: dict) -> str:
+    allowed = ", ".join(list(COMMON_MASTER_KEYS) + list(own))
+    other = [n for n, c in _masters().items() if key in {o.name for o in c.options}]
+    return (f"not an option of the {algorithm} master" + (
+        f" (it is one of {', '.join(other)})" if other else "") + f"; allowed: {allowed}")
+
+
+def _masters() -> dict:
+    from ..masters import MASTERS
+    return MASTERS
+
+
+def _master_option(path, key: str, option, value):
+    from ..masters import OptionError
+    try:
+        return option.check(value)
+    except OptionError as err:
+        raise SceneError(path, key, str(err)) from None
+
+
+def _check_between_options(path, m: Master) -> None:
+    from ..masters import OptionError, master_class
+    cls = master_class(m.algorithm)
+    try:
+        cls.check_options({o.name: getattr(m, o.name) for o in cls.options})
+    except OptionError as err:
+        key, _, message = str(err).partition(": ")
+        raise SceneError(path, key, message) from None
+
+
+def _parse_common_master_keys(path, raw: dict, m: Master) -> None:
+    if "step" in raw:
+        m.step = _number(path, "[master].step", raw["step"], positive=True)
+    if "fmu_tolerance" in raw:  # a relative tolerance
+        m.fmu_tolerance = _number(path, "[master].fmu_tolerance", raw["fmu_tolerance"],
+                                  positive=True, maximum=1.0)
     if "max_steps" in raw:
         m.max_steps = _integer(path, "[master].max_steps", raw["max_steps"], minimum=1,
                                maximum=10**12)
     if "order" in raw:
         m.order = _list(path, "[master].order", raw["order"], "component names")
-    return m
+    if "target" in raw:  # a relative error
+        m.target = _number(path, "[master].target", raw["target"], positive=True, maximum=1.0)
 
 
 def check_run_size(scene: "Scene", key: str = "[master].step") -> None:
@@ -228,8 +311,8 @@ def check_run_size(scene: "Scene", key: str = "[master].step") -> None:
     m, span = scene.master, scene.stop_time - scene.start_time
     limit = m.max_steps
     biggest = max(abs(scene.start_time), abs(scene.stop_time), 1.0)
-    smallest, which = (m.min_step, "[master].min_step") if m.algorithm == "adaptive" else \
-        (m.step, key)
+    variable = getattr(_masters().get(m.algorithm), "variable_step", False)
+    smallest, which = (m.min_step, "[master].min_step") if variable else (m.step, key)
     if not (math.isfinite(span) and span > 1e-13 * biggest):
         raise SceneError(scene.path, "[scene].stop_time", f"must exceed start_time = "
                                                           f"{scene.start_time!r} by more than "
@@ -243,9 +326,8 @@ def check_run_size(scene: "Scene", key: str = "[master].step") -> None:
                          f"to stop_time {scene.stop_time:g} s means up to {count:.3g} "
                          f"communication steps, more than the limit of {limit} "
                          "([master].max_steps or --max-steps raises it)")
-    if m.algorithm == "adaptive" and m.min_step > m.max_step:
-        raise SceneError(scene.path, "[master].min_step", f"{m.min_step!r} exceeds max_step = "
-                                                          f"{m.max_step!r}")
+    if m.algorithm in _masters():
+        _check_between_options(scene.path, m)
 
 
 def _parse_component(path, name: str, raw) -> Component:
@@ -451,12 +533,18 @@ def variable_causality(scene: Scene, comp: str, name: str) -> str | None:
 
 
 def _set_master(scene: Scene, name: str, value, key: str) -> None:
-    settable = sorted(set(Master.__dataclass_fields__) - {"order"})
+    """`master.KEY = value`: a common key, or an option some master declares (checked against
+    that declaration; a master that does not take it ignores it, so settings can be given
+    before the algorithm that uses them)."""
+    options = _master_options()
+    settable = sorted((set(COMMON_MASTER_KEYS) - {"order"}) | set(options))
     if name not in settable:
         raise SceneError(scene.path, key, f"unknown master key {_show(name)}; keys: "
                                           f"{', '.join(settable)}")
-    if isinstance(value, float) and value.is_integer() and \
-            name in ("extrapolation", "max_iterations", "max_steps"):
+    if name in options:
+        setattr(scene.master, name, _master_option(scene.path, key, options[name], value))
+        return
+    if isinstance(value, float) and value.is_integer() and name == "max_steps":
         value = int(value)
     checked = _parse_master(scene.path, {name: value})  # same checks as a [master] table
     setattr(scene.master, name, getattr(checked, name))

@@ -243,15 +243,22 @@ def _default_experiment(root, scene: Scene) -> None:
                      baseStepSize=number(scene.master.step))
 
 
+def _master_attributes(m) -> dict:
+    """algorithm, step, fmu_tolerance and the chosen master's own options (its declaration)."""
+    values = m.resolved()
+    out = {"algorithm": m.algorithm, "step": number(m.step)}
+    for key, value in values.items():
+        if key not in ("algorithm", "step", "fmu_tolerance", "max_steps", "order"):
+            out[key] = str(value) if isinstance(value, int) else number(value)
+    out["fmu_tolerance"] = number(m.fmu_tolerance)
+    return out
+
+
 def scene_annotation(scene: Scene):
     """<crankfmu:Scene>: master settings, record list and input tables, read back by load_ssp."""
     m = scene.master
     node = etree.Element(q("crankfmu", "Scene"), nsmap={"crankfmu": NS["crankfmu"]})
-    master = etree.SubElement(node, q("crankfmu", "Master"), {
-        "algorithm": m.algorithm, "step": number(m.step), "extrapolation": str(m.extrapolation),
-        "tolerance": number(m.tolerance), "fmu_tolerance": number(m.fmu_tolerance),
-        "max_iterations": str(m.max_iterations), "min_step": number(m.min_step),
-        "max_step": number(m.max_step)})
+    master = etree.SubElement(node, q("crankfmu", "Master"), _master_attributes(m))
     if m.max_steps != MAX_STEPS:  # only when raised or lowered: default files stay as they were
         master.set("max_steps", str(m.max_steps))
     for name in m.order:

@@ -25,8 +25,8 @@ from .ssp_export import (FMU_TYPE, NS, OSP_ANNOTATION, PARAMETER_SET_TYPE, SCENE
                          SSD_NAME, q)
 
 SCHEMA_DIR = Path(__import__("fmpy").__file__).parent / "ssp" / "schema"
-FLOAT_KEYS = ("step", "tolerance", "fmu_tolerance", "min_step", "max_step")
-INT_KEYS = ("extrapolation", "max_iterations", "max_steps")
+FLOAT_KEYS = ("step", "fmu_tolerance")  # the common [master] keys; the masters' own options
+INT_KEYS = ("max_steps",)                # take their type from their declaration
 # Limits on a (possibly hostile) archive, checked while streaming each entry out of the zip:
 MAX_XML_BYTES = 16 << 20       # the SSD and each .ssv, parsed in memory
 MAX_FMU_BYTES = 256 << 20      # each FMU, streamed to the run's private folder
@@ -397,11 +397,19 @@ def _float(path, node, attr: str) -> float:
 def _master(path, node) -> dict:
     if node is None:
         return {}
+    from ..masters import MASTERS, all_options
+    options = all_options()
+    float_keys = FLOAT_KEYS + tuple(n for n, o in options.items() if o.kind is float)
+    int_keys = INT_KEYS + tuple(n for n, o in options.items() if o.kind is int)
+    chosen = MASTERS.get(node.get("algorithm", "gauss-seidel"))
+    own = {o.name for o in chosen.options} if chosen else set(options)
     master: dict = {}
     for key, text in node.attrib.items():
-        if key in FLOAT_KEYS:
+        if key in options and key not in own:
+            continue  # files written before the masters declared their options hold every key
+        if key in float_keys:
             master[key] = _float(path, node, key)
-        elif key in INT_KEYS:
+        elif key in int_keys:
             try:
                 master[key] = int(text)
             except (ValueError, OverflowError):

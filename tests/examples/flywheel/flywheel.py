@@ -35,7 +35,7 @@ class Flywheel(PhysicsModel):
         return [0.0, self.p.w_start]
 
     def derivatives(self, t, x, u):
-        tau, J_driver = u
+        tau, J_driver = u[self.IN.flange_tau], u[self.IN.flange_J]
         return (x[1], (tau - self.p.b * x[1]) / (self.p.J + J_driver))
 
     def output_values(self, t, x, u):

@@ -90,10 +90,11 @@ class DcServoMotor(PhysicsModel):
     # -- algebraic parts -------------------------------------------------------------------
     def _voltage(self, x, u):
         """(U applied, U before the limit) for the current state and inputs."""
+        IN = self.IN
         if not self.on("speed_loop"):
-            return u[2], u[2]
+            return u[IN.u], u[IN.u]
         integral = x[-1]
-        u_cmd = self.p.k_p * (u[3] - u[0]) + integral
+        u_cmd = self.p.k_p * (u[IN.w_ref] - u[IN.flange_w]) + integral
         return min(max(u_cmd, -self.p.U_max), self.p.U_max), u_cmd
 
     def static_torque(self, U: float, w: float) -> float:
@@ -102,7 +103,7 @@ class DcServoMotor(PhysicsModel):
     def _torque(self, x, u):
         if self.on("electrical_lag"):
             return x[0]
-        return self.static_torque(self._voltage(x, u)[0], u[0])
+        return self.static_torque(self._voltage(x, u)[0], u[self.IN.flange_w])
 
     # -- contract --------------------------------------------------------------------------
     def initial_state(self, u):
@@ -111,20 +112,22 @@ class DcServoMotor(PhysicsModel):
         x = []
         if self.on("electrical_lag"):
             U = self._voltage([0.0], u)[0]
-            x.append(self.static_torque(U, u[0]))
+            x.append(self.static_torque(U, u[self.IN.flange_w]))
         if self.on("speed_loop"):
             x.append(0.0)
         return x
 
     def derivatives(self, t, x, u):
+        IN = self.IN
         dx = [0.0] * len(x)
         U, u_cmd = self._voltage(x, u)
         k = 0
         if self.on("electrical_lag"):
-            dx[0] = (self.static_torque(U, u[0]) - x[0]) / self.tau
+            dx[0] = (self.static_torque(U, u[IN.flange_w]) - x[0]) / self.tau
             k = 1
         if self.on("speed_loop"):
-            dx[k] = self.p.k_i * (u[3] - u[0]) + (U - u_cmd) * self.p.k_i / self.p.k_p
+            dx[k] = self.p.k_i * (u[IN.w_ref] - u[IN.flange_w]) + \
+                (U - u_cmd) * self.p.k_i / self.p.k_p
         return dx
 
     def jacobian(self, t, x, u):
@@ -137,7 +140,7 @@ class DcServoMotor(PhysicsModel):
             saturated = U != u_cmd
             dU_dI = 0.0 if saturated else 1.0
             if self.on("electrical_lag"):
-                unclipped = abs(self.mu * U - self.s * u[0]) < self.p.M_max
+                unclipped = abs(self.mu * U - self.s * u[self.IN.flange_w]) < self.p.M_max
                 jac[0, 1] = (self.mu * dU_dI if unclipped else 0.0) / self.tau
             jac[-1, -1] = (dU_dI - 1.0) * self.p.k_i / self.p.k_p
         return jac
@@ -145,7 +148,8 @@ class DcServoMotor(PhysicsModel):
     def output_values(self, t, x, u):
         M = self._torque(x, u)
         U = self._voltage(x, u)[0]
-        return [M, self.p.J_rotor + self.p.J_flywheel, M / self.p.k_phi, U, M * u[0]]
+        return [M, self.p.J_rotor + self.p.J_flywheel, M / self.p.k_phi, U,
+                M * u[self.IN.flange_w]]
 
     # -- closed-form step ------------------------------------------------------------------
     def advance(self, t0, x0, h, u_of_t, rtol, atol):
@@ -154,14 +158,15 @@ class DcServoMotor(PhysicsModel):
             return super().advance(t0, x0, h, u_of_t, rtol, atol)
         self._check_inputs(t0, u_of_t)
         u, d1, d2 = taylor
-        w = [u[0], d1[0], 0.5 * d2[0]]          # shaft speed over the step, in s = t - t0
+        i_w, i_u = self.IN.flange_w, self.IN.u
+        w = [u[i_w], d1[i_w], 0.5 * d2[i_w]]    # shaft speed over the step, in s = t - t0
         lag, loop = self.on("electrical_lag"), self.on("speed_loop")
         M = x0[0] if lag else 0.0
         I = x0[-1] if loop else 0.0
         s = 0.0
         for _ in range(MAX_PIECES):
             U, s_end, I_end = self._voltage_piece(s, h, I, u, d1, d2) if loop else \
-                ([u[2], d1[2], 0.5 * d2[2]], h, 0.0)
+                ([u[i_u], d1[i_u], 0.5 * d2[i_u]], h, 0.0)
             if lag:
                 M = self._lag_over(M, U, w, s, s_end)
             I, s = I_end, s_end
@@ -174,7 +179,8 @@ class DcServoMotor(PhysicsModel):
         """(U(s') as a polynomial, end of the piece, I at its end) for the speed loop from s:
         up to h or to where the voltage limit is reached or left."""
         p = self.p
-        e = [u[3] - u[0], d1[3] - d1[0], 0.5 * (d2[3] - d2[0])]   # w_ref - w over the step
+        i_ref, i_w = self.IN.w_ref, self.IN.flange_w
+        e = [u[i_ref] - u[i_w], d1[i_ref] - d1[i_w], 0.5 * (d2[i_ref] - d2[i_w])]  # w_ref - w
         e_local = cf.poly_shift(e, s)
         I_poly = cf.poly_add([I], cf.poly_integral(e_local), scales=[1.0, p.k_i])
         U_free = cf.poly_add(I_poly, e_local, scales=[1.0, p.k_p])   # in sigma = s' - s

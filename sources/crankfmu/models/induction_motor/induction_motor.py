@@ -141,6 +141,6 @@ class InductionMotor(PhysicsModel):
         return np.zeros(0)
 
     def output_values(self, t, x, u):
-        w = float(u[0])
+        w = float(u[self.IN.flange_w])
         M = self.torque(w)
         return np.array([M, self.J_shaft, 1.0 - w / self.w_s, M * w])

@@ -1,43 +1,6 @@
-"""Cold pipe rolling mill stand drive: twin crank-slider (seed mill_stand_drive_structure).
-
-Two crank gears on one shaft (crank radius r, pins A and H coaxial) drive the stand (mass m_s,
-pins C and F coaxial) through two rods 2 and 4 of nominal length l; the stand moves along its
-guides (coordinate x, from the crank axis to the stand pins). Derivations: README.md here.
-
-Kinematics (lambda = r/l, R = sqrt(l^2 - r^2 sin^2 phi), rod angle beta: sin beta = r sin phi/l):
-    x   = r cos phi + R
-    x'  = -r sin phi - r^2 sin phi cos phi / R
-    x'' = -r cos phi - r^2 cos 2phi / R - r^4 sin^2 phi cos^2 phi / R^3
-    beta' = r cos phi / R                          (' = d/dphi)
-
-Reduced dynamics at the crank (Lagrange, massless rods):
-    J(phi) phi'' + m_s x' x'' phi'^2 = i M_D + M_f(phi, phi') + x' F_load
-    J(phi) = i^2 J_input + J_crank + m_s x'^2,     J_input = flange_J
-
-Assembly preload (effect assembly_preload; joint variant 0, or any variant when the guides hold
-the stand's skew): the rods, l2 = l + d/2 and l4 = l - d/2 (d = rod_mismatch), span the same
-distance between the crank-pin axis and the stand-pin axis, so they form a closed loop of two
-springs in series, k_j = E A / l_j:
-    P = k2 k4/(k2 + k4) d = E A d/(l2 + l4)        (rod 2 compressed, rod 4 stretched)
-The external load divides in parallel by stiffness: T2 = T l4/(l2 + l4) - P, T4 = T l2/(l2 + l4)
-+ P, T the total rod tension. In variants 1 and 2 the stand skews by d/(2b) in the plane of the
-rods and P = 0; the load divides statically, T2 = T4 = T/2.
-
-Friction from the preload: each of the four pins A, C, F, H carries |P| and a friction moment
-mu r_pin |P| against its relative rotation: (1 + beta') phi' at A and H (crank - rod),
-beta' phi' at C and F (rod - stand). By virtual work this is one torque at the crank:
-    M_f = -2 mu r_pin |P| (1 + beta' + |beta'|) tanh(phi'/w_reg),   P_friction = -M_f phi'.
-Rolling load (effect rolling_load): F_load = -F_roll tanh(v/v_reg) against the stand velocity v.
-
-Rigid coupling to a driver that integrates the shaft itself (effect driven_crank, the port
-convention of docs/ports.md; e.g. the carrier of PlanetaryClutchDrive): no crank states (the
-energy integrals E_friction, E_load stay); the crank follows shaft_phi, shaft_w (phi = phi_start
-+ shaft_phi/i, phi' = shaft_w/i) and the stand returns the terms of its reduced equation other
-than the acceleration's, at the input shaft:
-    shaft_J   = J(phi)/i^2                                         (with flange_J inside J)
-    shaft_tau = (M_f(phi, phi') + x' F_load - m_s x' x'' phi'^2)/i
-The crank acceleration is then the driver's: stand_a, F_rod2, F_rod4 need it and are reported
-as 0 in this mode (README.md here, section 10).
+"""Cold pipe rolling mill stand drive: twin crank-slider with assembly preload, pin friction and
+rolling load (seed mill_stand_drive_structure; MODELS.md section 5).
+Kinematics, reduced dynamics, preload, friction, variables and tests: README.md in this folder.
 """
 from __future__ import annotations
 
@@ -231,9 +194,9 @@ class MillStandDrive(PhysicsModel):
         return J, p.m_stand * dx * ddx
 
     def crank_acceleration(self, phi, w, u):
-        J, half_dJ = self.reduced_inertia(phi, u[1])
+        J, half_dJ = self.reduced_inertia(phi, u[self.IN.flange_J])
         dx = self.kinematics(phi)[1]
-        M = (self.p.gear_ratio * u[0] + self.friction_torque(phi, w)
+        M = (self.p.gear_ratio * u[self.IN.flange_tau] + self.friction_torque(phi, w)
              + dx * self.load_force(phi, w) - half_dJ * w * w)
         return M / J
 
@@ -260,7 +223,7 @@ class MillStandDrive(PhysicsModel):
         """(phi, phi'): the states, or with driven_crank the driver's shaft over the gear."""
         if self.on("driven_crank"):
             i = self.p.gear_ratio
-            return self.p.phi_start + u[2] / i, u[3] / i
+            return self.p.phi_start + u[self.IN.shaft_phi] / i, u[self.IN.shaft_w] / i
         return x[0], x[1]
 
     # -- contract -------------------------------------------------------------------------
@@ -292,12 +255,15 @@ class MillStandDrive(PhysicsModel):
         xs, dx, _, _, _ = self.kinematics(phi)
         T2, T4, a = (0.0, 0.0, 0.0) if self.on("driven_crank") else self.rod_forces(phi, w, u)
         M_f = self.friction_torque(phi, w)
-        J, _ = self.reduced_inertia(phi, u[1])
+        J, _ = self.reduced_inertia(phi, u[self.IN.flange_J])
         E_f = x[names.index("E_friction")] if "E_friction" in names else 0.0
         E_l = x[names.index("E_load")] if "E_load" in names else 0.0
         v = self.variant
         q_rank = (Q_RANK_GUIDED if self.p.guides_hold_skew == 1.0 else Q_RANK_FREE_SKEW)[v]
-        return np.array([i * w, i * phi, phi, w, xs, dx * w, a, T2, T4, self.preload(),
-                         self.stand_skew(), M_f, -M_f * w, E_f, self.load_force(phi, w), E_l,
-                         J, W_SEED[v], Q_SEED[v], q_rank, *self.shaft_load(phi, w, u[1])],
-                        dtype=float)
+        shaft_tau, shaft_J = self.shaft_load(phi, w, u[self.IN.flange_J])
+        return np.array(self.output_vector(dict(
+            flange_w=i * w, flange_phi=i * phi, phi=phi, w_crank=w, stand_x=xs, stand_v=dx * w,
+            stand_a=a, F_rod2=T2, F_rod4=T4, preload=self.preload(), stand_skew=self.stand_skew(),
+            M_friction=M_f, P_friction=-M_f * w, E_friction=E_f, F_load=self.load_force(phi, w),
+            E_load=E_l, J_reduced=J, W_mobility=W_SEED[v], q_malyshev=Q_SEED[v], q_rank=q_rank,
+            shaft_tau=shaft_tau, shaft_J=shaft_J)), dtype=float)

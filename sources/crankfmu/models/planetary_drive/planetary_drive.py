@@ -1,80 +1,125 @@
-"""Planetary drive of a crank press with friction brakes on the ring and the carrier
-(seed planetary_drive_friction_clutch; MODELS.md section 3; sources/crankfmu/models/planetary_drive/README.md).
-
-Type-A planetary gear: sun a (driven by the motor through the `sun_*` port), internal ring b,
-carrier h (drives the press through the `flange_*` port). p = r_b/r_a = -i_ab^h, Willis:
-
-    w_a = -p w_b + (1+p) w_h
-
-Generalised coordinates v = (w_b, w_h); T = 1/2 (J_a w_a^2 + J_b w_b^2 + J_h w_h^2) with
-J_a := J_a + sun_J and J_h := J_h + flange_J; Lagrange (planets lumped into the carrier):
-
-    [J_a p^2 + J_b      -J_a p (1+p)     ] [w_b']   [ -p M_A + F_b            ]
-    [-J_a p (1+p)        J_a (1+p)^2 + J_h] [w_h'] = [ (1+p) M_A + tau_fl + F_h ]
-
-    M_A = sun_tau + F_a           (F_a = -M_ca while the sun turns forwards: MODELS.md's
-                                   M_A = M_motor - M_ca)
-    tau_fl = flange_tau           (external torque on the carrier from a coupled press)
-    F_k  = friction torque on element k, |F_k| <= C_k
-
-Three friction elements k, each with its speed w_k = G_k . v:
-    a  sun resistance           C_a = M_ca                 G_a = (-p, 1+p)
-    b  ring brake + resistance  C_b = M_tb(t) + M_cb       G_b = (1, 0)
-    h  carrier brake + resist.  C_h = M_th(t) + M_ch       G_h = (0, 1)
-  sliding (direction d = sgn w_k): F_k = -C_k d.
-  locked  (d = 0): a constraint on the ACCELERATION G_k . v' = 0 (w_k stays exactly 0.0 for
-          b and h; the sun's speed is reported as exactly 0.0); F_k is the constraint torque.
-  Possible lock sets: none, one element (1 DOF left), or all three (at rest: two locked
-  elements hold the third by Willis; the three friction torques are then statically
-  indeterminate, and the rest holds while an F_a exists with every |F_k| <= C_k).
-Mode changes (events, located by the integrator):
-  sliding -> w_k reaches 0: w_k := 0 exactly; lock if the torques allow, else it passes
-          through zero and slides the other way.
-  one locked -> F_k reaches -C_k (breaks free forwards) or +C_k (backwards).
-  all locked -> the feasible interval of F_a closes.
-  At every such event the new modes are the unique Coulomb solution: the acceleration
-  minimises the convex f(a) = 1/2 a.M.a - Q.a + sum_{k at rest} C_k |G_k.a| (Gauss's
-  principle with maximal dissipation), found by comparing f at its few candidate points.
-This is the Modelica.Mechanics.Rotational PartialFriction logic (locked = acceleration
-constraint, constant sliding friction) for three coupled elements, without its
-StartForward/StartBackward modes: a member that breaks free starts sliding at w = 0 with an
-acceleration of the breakaway sign. No chattering: a lock costs one event, a break-free one.
-
-Brake torque laws, t since the last command edge (t0), M0 the torque at the edge:
-  exponential (default)   engage  M = M_p - (M_p - M0) exp(-alpha t)   (= M_p (1 - e^-at), M0=0)
-                          release M = M0 exp(-beta t)                  (= M_p e^-bt, M0=M_p)
-  effect power_law        engage  M = M0 + (M_p - M0) min(t/t_c, 1)^z   (= B t^z, B = M_p/t_c^z)
-                          release M = M0 (1 - min(t/t_r, 1))^z          (the engagement retraced)
-Command (input `command`, >= 0.5 means 1): an edge 0 -> 1 engages brake b and releases brake h
-(engagement, period 2, then working stroke, period 3, once b locks); an edge 1 -> 0 releases b and
-engages h (stopping, period 4, then idle, period 1, once h locks). An edge is an event (at a
-communication point, or inside a step if the input changes continuously).
-
-Press coupling: the carrier port (flange_tau/flange_J in, flange_w/flange_phi out) lets a press be
-coupled later. Coupling a press that has its own dynamics rigidly to the carrier is the classic
-hard case of co-simulation (two inertias on one rigid shaft, algebraic loop through the
-torque): see sources/crankfmu/models/planetary_drive/README.md.
+"""Planetary drive of a crank press with friction brakes on the ring and the carrier (seed
+planetary_drive_friction_clutch, eq. (1)-(10); MODELS.md section 3): three coupled Coulomb
+elements that lock and break free, brake laws, the four periods, a carrier port for a press.
+Equations, modes, events, variables and tests: the model card README.md in this folder.
 """
 from __future__ import annotations
 
-import copy
+import enum
 import itertools
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
-from ...runtime.model import Effect, ParameterError, PhysicsModel, Variable
+from ...runtime.model import Effect, ParameterError, PhysicsModel, Variable, name_indices
 
 MEMBERS = ("b", "h")      # braked members
 ELEMENTS = ("a", "b", "h")  # friction elements: sun resistance, ring and carrier brakes
-# state layout
-I_PHI = {"b": 0, "h": 1}
-I_W = {"b": 2, "h": 3}
-I_EB, I_EH, I_ER, I_WS, I_WF = 4, 5, 6, 7, 8
-# input layout
-U_CMD, U_TAU, U_JA, U_FTAU, U_FJ = 0, 1, 2, 3, 4
+STATE_NAMES = ("phi_b", "phi_h", "w_b", "w_h", "E_brake_b", "E_brake_h", "E_resist", "W_sun",
+               "W_flange")
+X = name_indices("PlanetaryClutchDrive", "state", STATE_NAMES)  # x[X.w_b]: state by name
 
 NEVER = -1.0  # event-time outputs before the first such event
+
+
+class Direction(enum.Enum):
+    """How a friction element moves. `sign` is the sign of its speed while sliding, 0 while
+    locked: the d of F_k = -C_k d and of the slip power d w. A plain int attribute, not an
+    IntEnum: an IntEnum times a numpy float costs ~1.5 us (numpy's slow path), in every
+    right-hand side."""
+
+    BACKWARD = -1
+    LOCKED = 0
+    FORWARD = 1
+
+    def __init__(self, sign: int):
+        self.sign = sign
+
+
+@dataclass
+class ElementState:
+    """Mode of one friction element (sun a, ring b, carrier h) and its lock history."""
+
+    direction: Direction
+    t_lock: float = NEVER  # s, when it last locked
+    t_slip: float = NEVER  # s, when it last broke free
+    n_lock: int = 0
+    n_slip: int = 0
+
+
+@dataclass
+class BrakeState:
+    """A brake's law since the last command edge: engaging or releasing from M0 at t0."""
+
+    engaging: bool
+    t0: float = 0.0  # s, start of the law (the command edge)
+    M0: float = 0.0  # N.m, torque at t0
+
+
+@dataclass
+class Modes:
+    """The discrete state: everything but the continuous states that the motion depends on.
+    `to_json`/`from_json` give the JSON-safe form the FMU saves (floats exact, -inf as None)."""
+
+    command: int
+    brakes: dict[str, BrakeState]
+    elements: dict[str, ElementState]
+    t_command: float = NEVER  # s, time of the last command edge
+    t_last: float = -math.inf  # s, time of the last discrete update (power-law breakpoints)
+    n_pass: int = 0  # passes of a member through zero speed without locking
+    n_events: int = 0
+
+    def to_json(self) -> dict:
+        return {"command": self.command, "t_command": self.t_command,
+                "t_last": None if self.t_last == -math.inf else self.t_last,
+                "n_pass": self.n_pass, "n_events": self.n_events,
+                "brakes": {k: {"engaging": b.engaging, "t0": b.t0, "M0": b.M0}
+                           for k, b in self.brakes.items()},
+                "elements": {k: {"direction": e.direction.sign, "t_lock": e.t_lock,
+                                 "t_slip": e.t_slip, "n_lock": e.n_lock, "n_slip": e.n_slip}
+                             for k, e in self.elements.items()}}
+
+    @classmethod
+    def from_json(cls, d: dict) -> "Modes":
+        return cls(command=int(d["command"]), t_command=float(d["t_command"]),
+                   t_last=-math.inf if d["t_last"] is None else float(d["t_last"]),
+                   n_pass=int(d["n_pass"]), n_events=int(d["n_events"]),
+                   brakes={k: BrakeState(bool(b["engaging"]), float(b["t0"]), float(b["M0"]))
+                           for k, b in d["brakes"].items()},
+                   elements={k: ElementState(Direction(e["direction"]), float(e["t_lock"]),
+                                             float(e["t_slip"]), int(e["n_lock"]),
+                                             int(e["n_slip"]))
+                             for k, e in d["elements"].items()})
+
+
+class EventKind(enum.Enum):
+    BREAK_REST = "break_rest"  # all at rest: the feasible interval of F_a closes
+    SLIP = "slip"              # the single locked element breaks free in `direction`
+    ZERO = "zero"              # a sliding element reaches zero speed
+    COMMAND = "command"        # the command input crosses 0.5
+    TIME = "time"              # a kink of a power-law brake torque (at `time`)
+
+
+@dataclass(frozen=True)
+class Event:
+    """What an event function's zero means (on_event reads it by the function's index)."""
+
+    kind: EventKind
+    element: str | None = None
+    direction: Direction = Direction.LOCKED
+    time: float | None = None  # s, TIME events only
+
+
+LOCKED = Direction.LOCKED  # a module name: reading it off the Enum class costs ~50 ns, often
+
+# Events are values: built once here, not at every integration restart (constructing a frozen
+# dataclass costs ~1 us). TIME events carry their time and are built when needed.
+BREAK_REST_EVENT = Event(EventKind.BREAK_REST)
+COMMAND_EVENT = Event(EventKind.COMMAND)
+ZERO_EVENTS = {k: Event(EventKind.ZERO, k) for k in ELEMENTS}
+SLIP_EVENTS = {(k, d): Event(EventKind.SLIP, k, d) for k in ELEMENTS
+               for d in (Direction.FORWARD, Direction.BACKWARD)}
 
 
 class PlanetaryClutchDrive(PhysicsModel):
@@ -202,40 +247,28 @@ class PlanetaryClutchDrive(PhysicsModel):
         return self.p.r_b / self.p.r_a
 
     # -- discrete state --------------------------------------------------------------------
-    def _fresh_discrete(self) -> dict:
+    def _fresh_modes(self) -> Modes:
+        """Brakes fully on (held member) or off at t = 0 (initial_state sets the directions)."""
         p = self.p
         stroke = p.initial_period == 3.0
-        d = {
-            "command": 1 if stroke else 0,
-            "t_command": NEVER,
-            # brake: [engaging (1) or releasing (0), t0 of the law, M0 at t0]
-            "brake_b": [1, 0.0, p.Mp_b] if stroke else [0, 0.0, 0.0],
-            "brake_h": [0, 0.0, 0.0] if stroke else [1, 0.0, p.Mp_h],
-            "dir_a": 1, "dir_b": 0, "dir_h": 0,  # +1/-1 sliding, 0 locked
-            "t_last": -math.inf,  # time of the last discrete update (power-law breakpoints)
-            "t_lock_a": NEVER, "t_slip_a": NEVER, "t_lock_b": NEVER, "t_slip_b": NEVER,
-            "t_lock_h": NEVER, "t_slip_h": NEVER,
-            "n_lock_a": 0, "n_lock_b": 0, "n_lock_h": 0, "n_slip_a": 0, "n_slip_b": 0,
-            "n_slip_h": 0, "n_pass": 0,
-            "n_events": 0,
-        }
-        return d
+        return Modes(
+            command=1 if stroke else 0,
+            brakes={"b": BrakeState(True, 0.0, p.Mp_b) if stroke else BrakeState(False),
+                    "h": BrakeState(False) if stroke else BrakeState(True, 0.0, p.Mp_h)},
+            elements={"a": ElementState(Direction.FORWARD),
+                      "b": ElementState(LOCKED), "h": ElementState(LOCKED)})
 
     def discrete_state(self) -> dict:
-        d = copy.deepcopy(self.d)
-        d["t_last"] = None if d["t_last"] == -math.inf else d["t_last"]
-        return d
+        return self.modes.to_json()
 
     def set_discrete_state(self, state: dict) -> None:
-        d = copy.deepcopy(state)
-        d["t_last"] = -math.inf if d["t_last"] is None else float(d["t_last"])
-        self.d = d
+        self.modes = Modes.from_json(state)
 
     def __init__(self, parameters=None, effects=None):
         super().__init__(parameters, effects)
         self._derive()
-        self.d = self._fresh_discrete()
-        self._event_kinds: list[tuple] = []
+        self.modes = self._fresh_modes()
+        self._events: list[Event] = []
 
     def _derive(self) -> None:
         """Constants derived from the parameters (again in initial_state, so a host that sets
@@ -258,7 +291,8 @@ class PlanetaryClutchDrive(PhysicsModel):
 
     def brake_torque(self, k: str, t: float) -> float:
         """Torque capacity M_tk(t) of brake k from its law and the last command edge."""
-        engaging, t0, M0 = self.d["brake_" + k]
+        brake = self.modes.brakes[k]
+        engaging, t0, M0 = brake.engaging, brake.t0, brake.M0
         Mp, alpha, beta, tc, tr, z = self._law(k)
         tau = max(t - t0, 0.0)
         if engaging:
@@ -279,19 +313,20 @@ class PlanetaryClutchDrive(PhysicsModel):
             return []
         out = []
         for k in MEMBERS:
-            engaging, t0, M0 = self.d["brake_" + k]
+            brake = self.modes.brakes[k]
+            engaging, t0, M0 = brake.engaging, brake.t0, brake.M0
             Mp, _, _, tc, tr, _ = self._law(k)
             if (engaging and M0 != Mp) or (not engaging and M0 != 0.0):
                 tb = t0 + (tc if engaging else tr)
-                if tb > self.d["t_last"]:
+                if tb > self.modes.t_last:
                     out.append(tb)
         return out
 
     # -- mechanics -------------------------------------------------------------------------
     def mass_matrix(self, u) -> np.ndarray:
         p, pr = self.p, self.ratio
-        Ja = p.J_a + u[U_JA]
-        Jh = p.J_h + u[U_FJ]
+        Ja = p.J_a + u[self.IN.sun_J]
+        Jh = p.J_h + u[self.IN.flange_J]
         return np.array([[Ja * pr * pr + p.J_b, -Ja * pr * (1 + pr)],
                          [-Ja * pr * (1 + pr), Ja * (1 + pr) ** 2 + Jh]])
 
@@ -302,26 +337,28 @@ class PlanetaryClutchDrive(PhysicsModel):
     def _loads(self, t, u):
         """(M, Q, C): mass matrix, generalised port torques, friction capacities."""
         p = self.p
-        Q = u[U_TAU] * self._G["a"] + np.array([0.0, u[U_FTAU]])
+        Q = u[self.IN.sun_tau] * self._G["a"] + np.array([0.0, u[self.IN.flange_tau]])
         C = {"a": p.M_ca, "b": self.brake_torque("b", t) + p.M_cb,
              "h": self.brake_torque("h", t) + p.M_ch}
         return self.mass_matrix(u), Q, C
 
-    def _dirs(self) -> dict:
-        return {k: self.d["dir_" + k] for k in ELEMENTS}
+    def _signs(self) -> dict[str, int]:
+        """Direction.sign of each friction element (+1/-1 sliding, 0 locked)."""
+        elements = self.modes.elements
+        return {k: elements[k].direction.sign for k in ELEMENTS}
 
-    def _solve(self, t, u, dirs=None):
+    def _solve(self, t, u, signs=None):
         """Accelerations (dw_b, dw_h), friction torques F_k and capacities C_k in the modes
-        `dirs` (default: the current ones). Locked sets are {}, {j} or all three (two locked
+        `signs` (Direction.sign per element; default: the current ones). Locked sets are {}, {j} or all three (two locked
         members hold the third at rest by Willis); with all three locked the friction torques
         are statically indeterminate: F_a is chosen closest to 0 in its feasible interval and
         `slack` is the interval's width (negative: the rest cannot be held)."""
-        dirs = self._dirs() if dirs is None else dirs
+        signs = self._signs() if signs is None else signs
         M, Q, C = self._loads(t, u)
         G, N = self._geometry()
-        F = {k: -C[k] * d for k, d in dirs.items() if d}
+        F = {k: -C[k] * d for k, d in signs.items() if d}
         Qt = Q + sum((F[k] * G[k] for k in F), np.zeros(2))
-        locked = [k for k in ELEMENTS if not dirs[k]]
+        locked = [k for k in ELEMENTS if not signs[k]]
         slack = math.inf
         if not locked:
             det = M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]
@@ -360,13 +397,13 @@ class PlanetaryClutchDrive(PhysicsModel):
         each candidate and keep the least. `shrink` < 1 scales the stuck capacities (used at a
         break-free event to decide on the side of breaking free)."""
         for k, direction in (forced or {}).items():
-            self.d["dir_" + k] = direction
-        dirs = self._dirs()
+            self.modes.elements[k].direction = direction
+        signs = self._signs()
         zero = [k for k in ELEMENTS if k in zero and k not in (forced or {})]
         M, Q, C = self._loads(t, u)
         G, N = self._geometry()
-        Qt = Q + sum((-C[k] * dirs[k] * G[k] for k in ELEMENTS
-                      if k not in zero and dirs[k]), np.zeros(2))
+        Qt = Q + sum((-C[k] * signs[k] * G[k] for k in ELEMENTS
+                      if k not in zero and signs[k]), np.zeros(2))
         Cz = {k: shrink * C[k] for k in zero}
 
         def f(a):
@@ -389,47 +426,55 @@ class PlanetaryClutchDrive(PhysicsModel):
         if len(stuck) == 2:  # two stuck hold the third (cannot happen for the minimiser)
             stuck = set(ELEMENTS)
         for k in zero:
-            self.d["dir_" + k] = 0 if k in stuck else (1 if G[k] @ a > 0.0 else -1)
+            self.modes.elements[k].direction = LOCKED if k in stuck else \
+                (Direction.FORWARD if G[k] @ a > 0.0 else Direction.BACKWARD)
 
-    def _lock_set(self):
-        return [k for k in ELEMENTS if not self.d["dir_" + k]]
+    def _lock_set(self) -> list[str]:
+        elements = self.modes.elements
+        return [k for k in ELEMENTS if elements[k].direction is LOCKED]
 
     def _record(self, t, before: dict) -> None:
-        """Count locks and break-frees between the modes `before` and now."""
+        """Count locks and break-frees between the modes `before` (`_signs()`) and now."""
         for k in ELEMENTS:
-            old, new = before[k], self.d["dir_" + k]
+            element = self.modes.elements[k]
+            old, new = before[k], element.direction.sign
             if old and not new:
-                self.d["n_lock_" + k] += 1
-                self.d["t_lock_" + k] = float(t)
+                element.n_lock += 1
+                element.t_lock = float(t)
             elif not old and new:
-                self.d["n_slip_" + k] += 1
-                self.d["t_slip_" + k] = float(t)
+                element.n_slip += 1
+                element.t_slip = float(t)
 
     def _zero_speeds(self, x) -> np.ndarray:
         """Put the locked members' speeds exactly at zero (all locked: everything at rest)."""
         locked = self._lock_set()
         if len(locked) >= 2:
-            x[I_W["b"]] = x[I_W["h"]] = 0.0
-        elif locked == ["b"] or locked == ["h"]:
-            x[I_W[locked[0]]] = 0.0
+            x[X.w_b] = x[X.w_h] = 0.0
+        elif locked == ["b"]:
+            x[X.w_b] = 0.0
+        elif locked == ["h"]:
+            x[X.w_h] = 0.0
         elif locked == ["a"]:  # w_a = -p w_b + (1+p) w_h = 0
             pr = self.ratio
-            x[I_W["b"]] = (1 + pr) * x[I_W["h"]] / pr
+            x[X.w_b] = (1 + pr) * x[X.w_h] / pr
         return x
 
     def period(self) -> int:
-        if self.d["command"]:
-            return 3 if self.d["dir_b"] == 0 else 2
-        return 1 if self.d["dir_h"] == 0 else 4
+        """1 idle, 2 engagement, 3 working stroke, 4 stopping."""
+        elements = self.modes.elements
+        if self.modes.command:
+            return 3 if elements["b"].direction is LOCKED else 2
+        return 1 if elements["h"].direction is LOCKED else 4
 
     def _apply_command(self, t, value: int) -> None:
+        modes = self.modes
         for k in MEMBERS:
             M_now = self.brake_torque(k, t)
             engage = (k == "b") == bool(value)
-            self.d["brake_" + k] = [1 if engage else 0, float(t), M_now]
-        self.d["command"] = int(value)
-        self.d["t_command"] = float(t)
-        self.d["n_events"] += 1
+            modes.brakes[k] = BrakeState(engage, float(t), M_now)
+        modes.command = int(value)
+        modes.t_command = float(t)
+        modes.n_events += 1
 
     def _holds(self, t, u) -> bool:
         """Do the present locks hold (friction torques within capacity)?"""
@@ -444,35 +489,34 @@ class PlanetaryClutchDrive(PhysicsModel):
         edge starts engagement/stopping, and locks that no longer hold break free. Hosts that
         integrate the model themselves (monolithic references) call this after every input
         discontinuity."""
-        value = 1 if u[U_CMD] >= 0.5 else 0
-        if value != self.d["command"]:
+        value = 1 if u[self.IN.command] >= 0.5 else 0
+        if value != self.modes.command:
             self._apply_command(t, value)
         if not self._holds(t, u):
-            before = self._dirs()
+            before = self._signs()
             self._choose_modes(t, u, self._lock_set(), shrink=1.0 - 1e-9)
             self._record(t, before)
-            self.d["n_events"] += 1
+            self.modes.n_events += 1
         return x
 
     # -- contract --------------------------------------------------------------------------
     def state_names(self):
-        return ("phi_b", "phi_h", "w_b", "w_h", "E_brake_b", "E_brake_h", "E_resist", "W_sun",
-                "W_flange")
+        return STATE_NAMES
 
     def initial_state(self, u):
         p, pr = self.p, self.ratio
         u = np.asarray(u, dtype=float)
         self._derive()
-        self.d = self._fresh_discrete()
-        x = np.zeros(9)
-        x[I_PHI["b"]], x[I_PHI["h"]] = p.phi_b_start, p.phi_h_start
+        self.modes = self._fresh_modes()
+        x = np.zeros(len(STATE_NAMES))
+        x[X.phi_b], x[X.phi_h] = p.phi_b_start, p.phi_h_start
         if p.initial_period == 1.0:  # carrier held, ring turns backwards
-            x[I_W["b"]] = -p.w_a_start / pr
+            x[X.w_b] = -p.w_a_start / pr
         else:  # ring held, carrier forwards
-            x[I_W["h"]] = p.w_a_start / (1 + pr)
-        w = {"a": p.w_a_start, "b": x[I_W["b"]], "h": x[I_W["h"]]}
+            x[X.w_h] = p.w_a_start / (1 + pr)
+        w = {"a": p.w_a_start, "b": x[X.w_b], "h": x[X.w_h]}
         for k in ELEMENTS:
-            self.d["dir_" + k] = int(np.sign(w[k]))
+            self.modes.elements[k].direction = Direction(int(np.sign(w[k])))
         zero = [k for k in ELEMENTS if w[k] == 0.0]
         self._choose_modes(0.0, u, zero)
         return self._zero_speeds(x)
@@ -486,62 +530,67 @@ class PlanetaryClutchDrive(PhysicsModel):
         return np.array([10.0, 10.0, w / self.ratio, w / (1 + self.ratio), E, E, E, E, E])
 
     def sun_speed(self, x) -> float:
-        if self.d["dir_a"] == 0:
+        if self.modes.elements["a"].direction is LOCKED:
             return 0.0
         pr = self.ratio
-        return -pr * x[I_W["b"]] + (1 + pr) * x[I_W["h"]]
+        return -pr * x[X.w_b] + (1 + pr) * x[X.w_h]
 
     def derivatives(self, t, x, u):
         p = self.p
         a, _, C, _ = self._solve(t, u)
-        w_b, w_h = x[I_W["b"]], x[I_W["h"]]
-        d = self.d
+        w_b, w_h = x[X.w_b], x[X.w_h]
+        e = self.modes.elements
         w_a = self.sun_speed(x)
-        slip_a, slip_b, slip_h = d["dir_a"] * w_a, d["dir_b"] * w_b, d["dir_h"] * w_h
-        return np.array([
+        slip_a, slip_b, slip_h = (e["a"].direction.sign * w_a, e["b"].direction.sign * w_b,
+                                  e["h"].direction.sign * w_h)
+        return np.array([  # in the order of STATE_NAMES
             w_b, w_h, a[0], a[1],
             (C["b"] - p.M_cb) * slip_b,
             (C["h"] - p.M_ch) * slip_h,
             p.M_ca * slip_a + p.M_cb * slip_b + p.M_ch * slip_h,
-            u[U_TAU] * w_a,
-            u[U_FTAU] * w_h,
+            u[self.IN.sun_tau] * w_a,
+            u[self.IN.flange_tau] * w_h,
         ])
 
     def kinetic_energy(self, x, u) -> float:
-        w = np.array([x[I_W["b"]], x[I_W["h"]]])
+        w = np.array([x[X.w_b], x[X.w_h]])
         return 0.5 * float(w @ self.mass_matrix(u) @ w)
 
     def output_values(self, t, x, u):
         pr = self.ratio
         _, F, _, _ = self._solve(t, u)
         w_a = self.sun_speed(x)
-        phi_a = -pr * x[I_PHI["b"]] + (1 + pr) * x[I_PHI["h"]]
-        d = self.d
-        return np.array([
-            w_a, phi_a, x[I_W["h"]], x[I_PHI["h"]],
-            w_a, x[I_W["b"]], x[I_W["h"]],
-            self.brake_torque("b", t), self.brake_torque("h", t), F["b"], F["h"], F["a"],
-            x[I_EB], x[I_EH], x[I_ER], x[I_WS], x[I_WF], self.kinetic_energy(x, u),
-            float(self.period()), d["t_command"], d["t_lock_b"], d["t_slip_b"],
-            d["t_lock_h"], d["t_slip_h"], float(d["n_lock_b"]), float(d["n_lock_h"]),
-            float(d["n_events"]),
-        ], dtype=float)
+        phi_a = -pr * x[X.phi_b] + (1 + pr) * x[X.phi_h]
+        m = self.modes
+        b, h = m.elements["b"], m.elements["h"]
+        return np.array(self.output_vector(dict(
+            sun_w=w_a, sun_phi=phi_a, flange_w=x[X.w_h], flange_phi=x[X.phi_h],
+            w_a=w_a, w_b=x[X.w_b], w_h=x[X.w_h],
+            M_tb=self.brake_torque("b", t), M_th=self.brake_torque("h", t),
+            tau_b=F["b"], tau_h=F["h"], tau_a=F["a"],
+            E_brake_b=x[X.E_brake_b], E_brake_h=x[X.E_brake_h], E_resist=x[X.E_resist],
+            W_sun=x[X.W_sun], W_flange=x[X.W_flange], E_kin=self.kinetic_energy(x, u),
+            period=float(self.period()), t_command=m.t_command,
+            t_lock_b=b.t_lock, t_slip_b=b.t_slip, t_lock_h=h.t_lock, t_slip_h=h.t_slip,
+            n_lock_b=float(b.n_lock), n_lock_h=float(h.n_lock), n_events=float(m.n_events),
+        )), dtype=float)
 
     # -- events ----------------------------------------------------------------------------
     def event_functions(self, u_of_t):
-        kinds, funcs = [], []
+        events, funcs = [], []
         G, _ = self._geometry()
 
-        def add(kind, g, direction):
+        def add(event, g, direction):
             g.terminal, g.direction = True, direction
-            kinds.append(kind)
+            events.append(event)
             funcs.append(g)
 
         locked = self._lock_set()
         if len(locked) == 3:  # all at rest: the feasible interval of F_a closes
-            add(("break_rest",), lambda t, x: self._solve(t, u_of_t(t))[3], -1)
+            add(BREAK_REST_EVENT, lambda t, x: self._solve(t, u_of_t(t))[3], -1)
         for k in ELEMENTS:
-            if self.d["dir_" + k] == 0:
+            direction = self.modes.elements[k].direction
+            if direction is LOCKED:
                 if len(locked) == 1:
                     def g_fwd(t, x, k=k):  # F_k -> -C_k: breaks free forwards
                         _, F, C, _ = self._solve(t, u_of_t(t))
@@ -551,47 +600,48 @@ class PlanetaryClutchDrive(PhysicsModel):
                         _, F, C, _ = self._solve(t, u_of_t(t))
                         return C[k] - F[k]
 
-                    add(("slip", k, +1), g_fwd, -1)
-                    add(("slip", k, -1), g_bwd, -1)
-            else:
-                add(("zero", k), lambda t, x, gk=G[k]: float(gk @ x[2:4]),
-                    -self.d["dir_" + k])
-        sign = 1.0 if self.d["command"] == 0 else -1.0
-        add(("command",), lambda t, x: sign * (u_of_t(t)[U_CMD] - 0.5), 1)
+                    add(SLIP_EVENTS[k, Direction.FORWARD], g_fwd, -1)
+                    add(SLIP_EVENTS[k, Direction.BACKWARD], g_bwd, -1)
+            else:  # w_k = G_k . (w_b, w_h) falls to zero
+                add(ZERO_EVENTS[k], lambda t, x, gk=G[k]: float(gk @ x[X.w_b:X.w_h + 1]),
+                    -direction.sign)
+        sign = 1.0 if self.modes.command == 0 else -1.0
+        i_cmd = self.IN.command
+        add(COMMAND_EVENT, lambda t, x: sign * (u_of_t(t)[i_cmd] - 0.5), 1)
         for tb in self._breakpoints():
-            add(("time", tb), lambda t, x, tb=tb: t - tb, 1)
-        self._event_kinds = kinds
+            add(Event(EventKind.TIME, time=tb), lambda t, x, tb=tb: t - tb, 1)
+        self._events = events
         return funcs
 
     def on_event(self, t, x, u, index):
-        kind = self._event_kinds[index]
+        event = self._events[index]
         x = np.array(x, dtype=float)
-        d = self.d
-        d["t_last"] = float(t)
-        if kind[0] == "time":
+        modes, elements = self.modes, self.modes.elements
+        modes.t_last = float(t)
+        if event.kind is EventKind.TIME:
             return x
-        d["n_events"] += 1
-        before = self._dirs()
-        if kind[0] == "slip":  # the single locked member breaks free in the event's direction
-            k = kind[1]
-            self._choose_modes(t, u, [], forced={k: kind[2]})
-        elif kind[0] == "break_rest":
+        modes.n_events += 1
+        before = self._signs()
+        if event.kind is EventKind.SLIP:  # the single locked member breaks free
+            self._choose_modes(t, u, [], forced={event.element: event.direction})
+        elif event.kind is EventKind.BREAK_REST:
             self._choose_modes(t, u, list(ELEMENTS), shrink=1.0 - 1e-9)
-        elif kind[0] == "zero":  # member reaches zero speed: lock it if the torques allow
-            k = kind[1]
-            d["dir_" + k] = 0
+        elif event.kind is EventKind.ZERO:  # member reaches zero speed: lock it if it can
+            k = event.element
+            elements[k].direction = LOCKED
             zero = self._lock_set()
             if len(zero) >= 2:
                 zero = list(ELEMENTS)
             for j in zero:
-                d["dir_" + j] = 0
+                elements[j].direction = LOCKED
             x = self._zero_speeds(x)
             self._choose_modes(t, u, zero)
-            if d["dir_" + k] and k in MEMBERS:  # passed through zero without locking
-                d["n_pass"] += 1
-        elif kind[0] == "command":
-            d["n_events"] -= 1  # _apply_command counts it
-            self._apply_command(t, 0 if d["command"] else 1)
+            if elements[k].direction is not LOCKED and k in MEMBERS:
+                # passed through zero without locking
+                modes.n_pass += 1
+        elif event.kind is EventKind.COMMAND:
+            modes.n_events -= 1  # _apply_command counts it
+            self._apply_command(t, 0 if modes.command else 1)
             if not self._holds(t, u):
                 self._choose_modes(t, u, self._lock_set(), shrink=1.0 - 1e-9)
         self._record(t, before)

@@ -1,36 +1,6 @@
-"""Crank-rocker hammer: a motor-driven crank swings the impact rocker through a spring rod
-(sources/crankfmu/models/rocker_impact/crank_rocker.md; the rocker, contact and support are RockerImpact's, MODELS.md 4).
-
-    Geometry (x along the tool axis toward the tool, y up, pivot O at (u0, 0)):
-        strike point  O + S (sin th, -cos th)          (moves along +x by S th near th = 0)
-        rod eye B     O + b (sin(th + beta), -cos(th + beta))   (beta = pi: arm above O)
-        crank pin Q   A + a (cos phi, sin phi),  A = (crank_x, crank_y)
-        rod           spring-damper between Q and B: F = k_rod (l - L0) + c_rod l'  (tension > 0)
-
-Why a compliant rod: the tool sits at the rocker's extreme position, which is a dead centre of
-the crank-rocker (d th/d phi = 0), so a rigid linkage would reach the tool at zero speed and,
-during the 0.4 ms impact, would have to stop the crank and the motor with it. With a spring rod
-the rocker is a DOF of its own (a spring-driven oscillator): it over-swings the kinematic
-extreme, strikes, rebounds, and the crank (the DOF the motor torque drives, never at a dead
-centre for its own equation) only feels the rod force k_rod (l - L0), which stays bounded.
-
-Equations: the crank, J_cr phi'' = i tau_m + M_rod, J_cr = J_crank + i^2 J_motor (motor on the
-crank through a gear of ratio i = motor speed / crank speed); the rocker as in RockerImpact with
-the rod force as applied force at B (torque about O and component along the tool axis on the
-pivot). Energy: E_mech + E_radiated + E_damped = E_mech(0) + W_drive.
-
-Rigid coupling to a driver that integrates the shaft itself (effect driven_crank, the port
-convention of docs/ports.md; e.g. the carrier of PlanetaryClutchDrive): the crank then has no
-states (the rocker, contact and support keep theirs); it follows the inputs shaft_phi, shaft_w
-(phi = phi_start + shaft_phi/i, phi' = shaft_w/i) and returns what the shaft must carry, the
-terms of the crank equation J_cr phi'' = i tau_m + M_rod other than the acceleration's, reduced
-to the input shaft (the crank's inertia is constant, so there is no J'/2 phi'^2 term):
-    shaft_J   = J_crank/i^2 + flange_J      (added to the driver's inertia)
-    shaft_tau = M_rod(phi, phi', rocker)/i  (added to the driver's torques)
-The driver then integrates (J_d + J_crank/i^2) w_d' = tau_d + M_rod/i, the hammer's crank equation
-with w_d = i phi'. W_drive becomes the work of the crank on the rod, -integral M_rod phi' dt, and
-E_mech leaves out the crank's kinetic energy (the driver counts it with shaft_J), so the hammer's
-own balance E_mech + E_radiated + E_damped = E_mech(0) + W_drive keeps its form.
+"""Crank-rocker hammer: a motor-driven crank swings RockerImpact's rocker through a spring rod
+(MODELS.md section 4), or follows a driver that integrates the shaft (effect driven_crank).
+Geometry, equations, why a compliant rod, variables and tests: crank_rocker.md in this folder.
 """
 from __future__ import annotations
 
@@ -160,7 +130,7 @@ class CrankRockerHammer(RockerImpact):
         """(phi, phi'): the crank states, or with driven_crank the driver's shaft over the gear."""
         if self._driven:
             i = self.p.gear_ratio
-            return self.p.phi_start + u[2] / i, u[3] / i
+            return self.p.phi_start + u[self.IN.shaft_phi] / i, u[self.IN.shaft_w] / i
         return x[-4], x[-3]
 
     def rod(self, x, u):
@@ -226,7 +196,7 @@ class CrankRockerHammer(RockerImpact):
         return x
 
     def _crank_inertia(self, u) -> float:
-        return self.p.J_crank + self.p.gear_ratio ** 2 * u[1]
+        return self.p.J_crank + self.p.gear_ratio ** 2 * u[self.IN.flange_J]
 
     def shaft_load(self, x, u) -> tuple[float, float]:
         """(shaft_tau, shaft_J) at the input shaft: M_rod/i and J_cr/i^2."""
@@ -252,7 +222,7 @@ class CrankRockerHammer(RockerImpact):
         if self._driven:  # the driver integrates the crank; W_drive: the crank's work on the rod
             crank = [-M_crank * w, loss]
         else:
-            drive = p.gear_ratio * u[0]
+            drive = p.gear_ratio * u[self.IN.flange_tau]
             crank = [w, (drive + M_crank) / self._crank_inertia(u), drive * w, loss]
         return ([v0, ddu] if self.compliant else []) + rocker + crank
 
@@ -260,7 +230,8 @@ class CrankRockerHammer(RockerImpact):
         """Rocker (own J) and support, contact, crank + motor kinetic energy, rod spring
         (driven_crank: without the crank's kinetic energy, which the driver carries)."""
         stretch = self.rod(x, u)[4]
-        rocker = super().mechanical_energy(x, np.array([0.0, 0.0]))
+        no_drive = [0.0] * len(self.inputs)  # the motor's inertia is on the crank, not the rocker
+        rocker = super().mechanical_energy(x, no_drive)
         crank = 0.0
         if not self._driven:
             w = x[-3]

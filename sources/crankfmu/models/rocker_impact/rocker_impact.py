@@ -1,40 +1,7 @@
-"""Rocker impact unit (seed rocker_impact_unit, eq. 1-2; MODELS.md section 4).
-
-A rigid rocker (inertia J about the pivot, mass m, centre of mass at r, strike point at S from
-the pivot) strikes the end of a semi-infinite elastic rod (the tool). The pivot rests on an
-elastic support that moves along the tool axis. Coordinates: u0 the pivot displacement (toward
-the tool), theta the rocker angle from the strike position (the strike point moves by
-u0 + S theta), w the tool end. Lagrange (sources/crankfmu/models/rocker_impact/README.md):
-
-    m u0'' + m r theta''       = -P - T                  T = c0 u0       (support)
-    m r u0'' + J_t theta''     = -P S + tau_drive        J_t = J + flange_J
-    w' = P/Z,  Z = E F/a                                  (rod end, radiation impedance)
-    delta = u0 + S theta - w - gap,  P = c delta  or  K delta^1.5 (effect hertz_contact)
-
-Contact is unilateral: it begins when delta rises through 0 and ends when it falls back to 0
-(P returns to zero); both are located as events inside a communication step. While in contact,
-the largest P (an event on delta' = 0, which is P' = 0) and the largest |T| (events on
-u0' = 0, which is T' = 0, and the value at the end of contact) are located too, so the
-last-impact statistics do not depend on the communication step.
-
-Effect support_compliance off: the pivot is pinned (c0 -> infinity), u0 = 0, the strike-point
-mass is J_t/S^2 and T = -P - m r theta'' is the pivot reaction (it feeds through the drive
-torque and inertia).
-
-Linearised stiffnesses (effect hertz_contact off): c = 1.25 K^(2/3) Pm^(1/3) and
-c0 = k_n Tm^(1/3) from the paper's fixed-point iterations on the first-approximation peaks
-(rocker_linear.linearise, to 0.1 %), at initialization with J_t and the impact speed V0, unless
-c_contact / c_support give them. With hertz_contact on, c0 still comes from that iteration.
-
-Hertzian bearing (effect hertz_support, with support_compliance; seed 004): the support is the
-nonlinear law the paper linearises, T = kappa |u0|^1.5 sgn(u0), kappa = (k_n/1.25)^1.5, with the
-potential energy 0.4 kappa |u0|^2.5. (The linearisation c0 = k_n Tm^(1/3) is 1.25 x its secant
-stiffness T/u0 = kappa^(2/3) T^(1/3) at T = Tm: the same 1.25 as the contact's c.) The contact's
-linearised c, when hertz_contact is off, still comes from the iteration with the linear c0.
-
-The geometry is linearised about the strike position (the paper's model: the strike point moves
-along the tool axis by S theta); a drive may swing the rocker through a few tenths of a radian
-before the strike, the impact itself happens at theta ~ 0.
+"""Rocker impact unit (seed rocker_impact_unit, eq. (1)-(2), (5)-(8); MODELS.md section 4): a
+rigid rocker on an elastic pivot support strikes a semi-infinite elastic rod; unilateral
+contact, linearised or Hertzian contact and bearing, events at contact begin/end and the peaks.
+Equations, events, variables and tests: the model card README.md in this folder.
 """
 from __future__ import annotations
 
@@ -219,8 +186,10 @@ class RockerImpact(PhysicsModel):
         return self.contact_force(self.delta(x)) if self._d["contact"] else 0.0
 
     def _accelerations(self, x, u, P):
-        """(u0'', theta'', T) with the drive torque u[0] and inertia u[1] on the rocker shaft."""
-        return self._rocker_accelerations(x, P, u[0], self.p.J + u[1])
+        """(u0'', theta'', T) with the drive torque flange_tau and the inertia flange_J (inputs)
+        on the rocker shaft."""
+        IN = self.IN
+        return self._rocker_accelerations(x, P, u[IN.flange_tau], self.p.J + u[IN.flange_J])
 
     def _support_force(self, u0: float, v0: float) -> float:
         """T of the elastic support at displacement u0, speed v0."""
@@ -262,7 +231,7 @@ class RockerImpact(PhysicsModel):
         """Kinetic energy of rocker (+ drive inertia) + support and contact potential energy."""
         p = self.p
         u0, v, _, om, _, _, _, _ = self._split(x)
-        J_t = p.J + u[1]
+        J_t = p.J + u[self.IN.flange_J]
         E = 0.5 * p.m * v * v + p.m * p.r * v * om + 0.5 * J_t * om * om
         if self.compliant:
             E += self._spring_energy(u0)
@@ -310,7 +279,7 @@ class RockerImpact(PhysicsModel):
     def initial_state(self, u):
         p = self.p
         self._K_cache, self._Z_cache = self.K, self.Z   # parameters are fixed from here on
-        c, c0 = self.stiffnesses(float(u[1]))
+        c, c0 = self.stiffnesses(float(u[self.IN.flange_J]))
         if p.strike_at_start == 1.0:
             theta, omega = 0.0, p.V0 / p.S
         else:

@@ -127,6 +127,6 @@ class ShaftRotor(LinearModel):
     def output_values(self, t, x, u):
         theta, phi, w = x
         p = self.p
-        tau = -(p.k * theta + p.d_s * (u[0] - w))
+        tau = -(p.k * theta + p.d_s * (u[self.IN.flange_w] - w))
         return np.array([tau, w, phi,
                          0.5 * (p.J * w ** 2 + p.k * theta ** 2 + p.c * phi ** 2)])

@@ -1,48 +1,6 @@
-"""Stephenson six-bar crank press (seed stephenson_press_servo_drive, eq. 1-3, 21-22).
-
-Coordinates: x horizontal, y downward, crank centre O at the origin. The crank pin A is at
-(r cos phi, r sin phi); the base link 2 has its centre at A and moves in circular translation;
-the two parallel rods 3, 4 (length l) join it to the slider 5 on the vertical through O:
-
-    cos psi = -r cos(phi)/l,  sin psi = +sqrt(1 - cos^2 psi)   (rod angle, 0 < psi < pi)
-    S   = r sin(phi) + l sin(psi) + a                          (slider, BDC at phi = pi/2)
-    psi'  = -(r/l) sin(phi)/sin(psi)
-    psi'' = -[(r/l) cos(phi) + psi'^2 cos(psi)]/sin(psi)       (printed eq. 3 has a sign error)
-    S'  = r cos(phi) + l psi' cos(psi)
-    S'' = -r sin(phi) - l psi'^2 sin(psi) + l psi'' cos(psi)
-
-Base-link offset a (eq. 21; parameter `a`, default 0): link 2 is an equilateral triangle with
-the crank pin A at one vertex and the rods' hinges on the opposite side, a below A (its height);
-its centre of mass S2 is 2a/3 below A. The two equal parallel rods make link 2, the rods and the
-slider a parallelogram, so link 2 keeps the slider's orientation: it translates, every point of it
-moves like A, S2' = A' and J_2O = m2 |S2'|^2 = m2 r^2 for every a. The offset shifts the slider
-(S above, as printed in eq. 3) and the potential energy by constants and changes no term of
-eq. (1); the printed (21), r^2 + 4a^2/9 - (4/3) a r sin(phi), is not the kinetic energy of a
-translating link (sources/crankfmu/models/stephenson_press/geometry.md).
-
-Reduced inertia and its derivative (eq. 2, 22; ' is d/dphi):
-    J(phi)    = J_c + m5 S'^2 [+ rods],   J_c = i^2 J_input + J1 + m2 r^2
-    J'(phi)/2 = m5 S' S''     [+ rods]
-Rods (effect rod_inertia): two uniform bars, centre C = (r cos(phi)/2, r sin(phi) + (l/2) sin psi
-+ a), each adding m_rod |C'|^2 + (m_rod l^2/12) psi'^2 to J and m_rod C'.C'' +
-(m_rod l^2/12) psi' psi'' to J'/2.
-
-Motion (eq. 1):  J(phi) phi'' + J'(phi)/2 phi'^2 = i M_D + M_C(phi)
-    M_C = (G5 - F5) S' + G2 r cos(phi) [+ 2 m_rod g y_C']  (gravity terms: effect gravity)
-Forging force (effect forging_load): F5 = F_max sin(pi x/forging_angle) for
-x = phi - (pi/2 - forging_angle) (mod 2 pi) in [0, forging_angle], else 0 (the window ends at BDC).
-The window's edges are kinks of M_C: they are events (the integrator stops and restarts there).
-
-Rigid coupling to a driving member that integrates the shaft itself (effect driven_crank; e.g. the
-carrier of PlanetaryClutchDrive, sources/crankfmu/models/planetary_drive/README.md section 6): the press then has no
-states; its input shaft follows the inputs shaft_phi, shaft_w (phi = phi_start + shaft_phi/i,
-phi' = shaft_w/i) and it returns what the shaft must carry, the two terms of eq. (1) that are not
-the acceleration's:
-    shaft_J   = J(phi)/i^2                           (added to the driver's inertia)
-    shaft_tau = (M_C(phi) - J'(phi)/2 phi'^2)/i      (added to the driver's torques)
-so the driver integrates J(phi) phi'' + J'/2 phi'^2 = i M_D + M_C exactly as the press would, with
-the driving torque M_D now an internal force of the rigid shaft. The outputs shaft_tau/shaft_J are
-also given in the default (integrating) mode, from the press's own state.
+"""Stephenson six-bar crank press (seed stephenson_press_servo_drive, eq. (1)-(3), (21)-(22)):
+J(phi) phi'' + J'(phi)/2 phi'^2 = i M_D + M_C(phi), forging-window edges as events.
+Equations, variables and tests: the model card README.md here (base-link offset a: geometry.md).
 """
 from __future__ import annotations
 
@@ -210,7 +168,7 @@ class StephensonPress(PhysicsModel):
         """(phi, phi'): the states, or with driven_crank the driver's shaft over the gear."""
         if self.on("driven_crank"):
             i = self.p.gear_ratio
-            return self.p.phi_start + u[2] / i, u[3] / i
+            return self.p.phi_start + u[self.IN.shaft_phi] / i, u[self.IN.shaft_w] / i
         return x[0], x[1]
 
     def shaft_load(self, phi, w, J_input: float = 0.0) -> tuple[float, float]:
@@ -223,8 +181,8 @@ class StephensonPress(PhysicsModel):
         if self._driven:
             return ()
         phi, w = x
-        J, half_dJ, M_C = self.crank_terms(phi, u[1])[:3]
-        return (w, (self.p.gear_ratio * u[0] + M_C - half_dJ * w * w) / J)
+        J, half_dJ, M_C = self.crank_terms(phi, u[self.IN.flange_J])[:3]
+        return (w, (self.p.gear_ratio * u[self.IN.flange_tau] + M_C - half_dJ * w * w) / J)
 
     def event_functions(self, u_of_t):
         """The forging window's edges (phi = start and start + forging_angle, mod 2 pi), where
@@ -271,7 +229,7 @@ class StephensonPress(PhysicsModel):
     def output_values(self, t, x, u):
         phi, w = self.crank_motion(x, u)
         i = self.p.gear_ratio
-        J, half_dJ, M_C, F5, S, dS = self.crank_terms(phi, u[1])[:6]
+        J, half_dJ, M_C, F5, S, dS = self.crank_terms(phi, u[self.IN.flange_J])[:6]
         return [i * w, i * phi, phi, w, S, dS * w, F5, J, M_C, (M_C - half_dJ * w * w) / i,
                 J / (i * i)]
 

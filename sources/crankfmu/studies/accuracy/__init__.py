@@ -70,7 +70,7 @@ class AccuracyResult:
 def run_accuracy(scene, options: AccuracyOptions) -> AccuracyResult:
     import copy
 
-    from ...cosim.masters import MASTERS
+    from ...masters import MASTERS
 
     specs = scene_event_specs(scene)
     name = options.metric or scene_metric_name(scene)

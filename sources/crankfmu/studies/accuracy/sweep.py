@@ -96,7 +96,7 @@ class Outcome:
 
 
 def is_variable_step(algorithm: str) -> bool:
-    from ...cosim.masters import MASTERS
+    from ...masters import MASTERS
     cls = MASTERS.get(algorithm)
     return algorithm == "adaptive" or bool(getattr(cls, "variable_step", False))
 

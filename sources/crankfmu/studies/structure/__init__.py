@@ -9,8 +9,8 @@ See docs/structure.md for the format, the method and the results of the shipped 
 from .analysis import StructureResult, analyse
 from .description import (Joint, Mechanism, MechanismError, load_mechanism, loads_mechanism,
                           mechanism_from_dict)
-from .report import format_report, main, structure_report
+from .report import format_report, structure_report
 
 __all__ = ["StructureResult", "analyse", "Joint", "Mechanism", "MechanismError",
-           "load_mechanism", "loads_mechanism", "mechanism_from_dict", "format_report", "main",
+           "load_mechanism", "loads_mechanism", "mechanism_from_dict", "format_report",
            "structure_report"]

@@ -37,6 +37,8 @@ of every link that has a joint with the frame.
 """
 from __future__ import annotations
 
+from ...errors import CrankfmuError
+
 import math
 import tomllib
 from dataclasses import dataclass
@@ -54,7 +56,7 @@ UNIT = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 DEFAULT_RANK_TOLERANCE = 1e-8
 
 
-class MechanismError(ValueError):
+class MechanismError(CrankfmuError, ValueError):
     """An invalid mechanism description; names the file, the key and what is allowed."""
 
     def __init__(self, source: str, key: str, problem: str, allowed: str = ""):

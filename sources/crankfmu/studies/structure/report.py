@@ -1,10 +1,8 @@
 """Human-readable and JSON reports of a structural analysis (`crankfmu structure MECH.toml`)."""
 from __future__ import annotations
 
-import sys
-
 from .analysis import StructureResult, analyse
-from .description import MechanismError, load_mechanism
+from .description import load_mechanism
 
 
 def _pcounts(p_by: dict, prefix="p") -> str:
@@ -83,19 +81,3 @@ def structure_report(path, as_json: bool = False) -> str:
     """Analyse the mechanism file at `path`; the text report, or JSON if `as_json`."""
     result = analyse(load_mechanism(path))
     return result.to_json() if as_json else format_report(result)
-
-
-def main(argv=None) -> int:
-    """`crankfmu structure MECH.toml [--json]`: print the report; 2 on a description error."""
-    args = list(sys.argv[1:] if argv is None else argv)
-    as_json = "--json" in args
-    files = [a for a in args if a != "--json"]
-    if len(files) != 1 or any(a.startswith("-") for a in files):
-        print("usage: crankfmu structure MECH.toml [--json]", file=sys.stderr)
-        return 2
-    try:
-        print(structure_report(files[0], as_json))
-    except MechanismError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    return 0

@@ -21,7 +21,8 @@ import tomllib
 import numpy as np
 
 from crankfmu.models.induction_motor.induction_motor import InductionMotor
-from crankfmu.models.planetary_drive.planetary_drive import I_PHI, I_W, U_CMD, PlanetaryClutchDrive
+from crankfmu.models.planetary_drive.planetary_drive import X as DRIVE_STATE
+from crankfmu.models.planetary_drive.planetary_drive import PlanetaryClutchDrive
 from crankfmu.models.stephenson_press.stephenson_press import StephensonPress
 from crankfmu.system.load import load_scene
 
@@ -39,7 +40,7 @@ class RigidPlanetaryPress(PlanetaryClutchDrive):
 
     def crank(self, x):
         i = self.press.p.gear_ratio
-        return self.press.p.phi_start + x[I_PHI["h"]] / i, x[I_W["h"]] / i
+        return self.press.p.phi_start + x[DRIVE_STATE.phi_h] / i, x[DRIVE_STATE.w_h] / i
 
     def inputs_at(self, t, x) -> np.ndarray:
         phi, w = self.crank(x)

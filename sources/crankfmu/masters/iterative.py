@@ -24,12 +24,16 @@ import warnings
 import numpy as np
 
 from .base import Master, evaluate
+from .options import EXTRAPOLATION, TOLERANCE, Option
 
 CONTRACTION = 0.25  # a Newton iteration must cut the residual by this factor, else new Jacobian
+MAX_ITERATIONS = Option("max_iterations", int, "1", 20, "evaluations of a step before it is "
+                        "accepted unconverged (with a warning)", minimum=1, maximum=10_000)
 
 
 class Iterative(Master):
     name = "iterative"
+    options = (EXTRAPOLATION, TOLERANCE, MAX_ITERATIONS)
     needs_rollback = True
     solves_algebraic_loops = True  # its converged step satisfies the loop at t + h
     uses_error_scale = True
@@ -37,8 +41,8 @@ class Iterative(Master):
     def __init__(self, system, settings):
         super().__init__(system, settings)
         self.order = max(1, self.extrapolation)  # inputs interpolate between t and t + h
-        self.tolerance = float(settings.tolerance)
-        self.max_iterations = int(settings.max_iterations)
+        self.tolerance = self.option("tolerance")
+        self.max_iterations = self.option("max_iterations")
         self.delta = max(float(settings.fmu_tolerance), 1e-14) ** 0.5  # finite-difference size
         sizes = [len(system.out_names[c]) for c in system.order]
         self.offsets = dict(zip(system.order, np.cumsum([0] + sizes[:-1]).tolist()))

@@ -31,7 +31,8 @@ from crankfmu.runtime.model import PhysicsModel
 from crankfmu.models.rocker_impact.crank_rocker import CrankRockerHammer
 from crankfmu.models.induction_motor.induction_motor import InductionMotor
 from crankfmu.models.mill_stand.mill_stand import MillStandDrive
-from crankfmu.models.planetary_drive.planetary_drive import I_PHI, I_W, PlanetaryClutchDrive
+from crankfmu.models.planetary_drive.planetary_drive import X as DRIVE_STATE
+from crankfmu.models.planetary_drive.planetary_drive import PlanetaryClutchDrive
 from crankfmu.system.load import load_scene
 
 N_DRIVE = 9  # the drive's states come first
@@ -58,7 +59,7 @@ class RigidClutch(PhysicsModel):
     # -- the rigid shaft ------------------------------------------------------------------------
     def crank(self, X):
         i = self.mech.p.gear_ratio
-        return self.mech.p.phi_start + X[I_PHI["h"]] / i, X[I_W["h"]] / i
+        return self.mech.p.phi_start + X[DRIVE_STATE.phi_h] / i, X[DRIVE_STATE.w_h] / i
 
     def mech_state(self, X) -> np.ndarray:
         x = np.zeros(len(self.mech.state_names()))

@@ -15,30 +15,37 @@ from __future__ import annotations
 
 import warnings
 
-import numpy as np
-
-from .base import Master, evaluate
+from .base import Master
+from .options import EXTRAPOLATION, TOLERANCE, Option, OptionError
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 5.0
+MIN_STEP = Option("min_step", float, "s", 1e-6, "the smallest step a variable-step master "
+                  "takes (accepted whatever its error)", positive=True)
+MAX_STEP = Option("max_step", float, "s", 1e-2, "the largest step a variable-step master takes",
+                  positive=True)
 
 
 class Adaptive(Master):
     name = "adaptive"
+    options = (EXTRAPOLATION, TOLERANCE, MIN_STEP, MAX_STEP)
     needs_rollback = True
     variable_step = True
     uses_error_scale = True
 
     def __init__(self, system, settings):
         super().__init__(system, settings)
-        self.tolerance = float(settings.tolerance)
-        self.min_step, self.max_step = float(settings.min_step), float(settings.max_step)
-        if self.min_step > self.max_step:
-            raise ValueError(f"[master].min_step = {self.min_step} exceeds max_step = "
-                             f"{self.max_step}")
+        self.tolerance = self.option("tolerance")
+        self.min_step, self.max_step = self.option("min_step"), self.option("max_step")
         self.next_step = self._clip(float(settings.step))
         self.counts = {"accepted_steps": 0, "rejected_steps": 0, "accepted_above_tolerance": 0,
                        "smallest_step": None, "largest_step": None}
         self.extra_statistics = self.counts
+
+    @classmethod
+    def check_options(cls, values: dict) -> None:
+        if values["min_step"] > values["max_step"]:
+            raise OptionError(f"[master].min_step: {values['min_step']!r} exceeds max_step = "
+                              f"{values['max_step']!r}")
 
     def _clip(self, h: float) -> float:
         return min(max(h, self.min_step), self.max_step)
@@ -47,9 +54,11 @@ class Adaptive(Master):
         order = min(self.extrapolation, len(self.history.times) - 1)
         states = self.save_states()
         coefficients = self.source_coefficients(t, order)
+        rows = {c: coefficients[c] for c in self.system.order}  # the same rows as the sweep's
+        as_floats = {c: r.tolist() for c, r in rows.items()}
         while True:
-            predicted = {c: evaluate(coefficients[c], h) for c in self.system.order}
-            self.sequential_sweep(t, h, self.extrapolation)
+            predicted = {c: _evaluate(r, h) for c, r in as_floats.items()}
+            self.sequential_sweep(t, h, self.extrapolation, rows)
             error = self._error(predicted)
             factor = SAFETY * error ** (-1.0 / (order + 1)) if error > 0 else MAX_FACTOR
             if error <= 1.0 or h <= self.min_step * (1 + 1e-9):
@@ -63,8 +72,24 @@ class Adaptive(Master):
         return h
 
     def _error(self, predicted: dict) -> float:
-        errors = [np.max(np.abs(y - predicted[c]) / (self.tolerance * self.error_scale(c, y)))
-                  for c, y in self.system.outputs.items() if y.size]
+        """In Python floats (a few values per component): the operations of the numpy form
+        max(|y - P| / (tolerance * scale)), so the same floats; a NaN makes a component's
+        error NaN, as numpy's max does."""
+        errors = []
+        tolerance = self.tolerance
+        for c, y in self.system.outputs.items():
+            if not y.size:
+                continue
+            values = y.tolist()
+            worst = -1.0
+            for v, p, s in zip(values, predicted[c], self.scales.of_floats(c, values)):
+                e = abs(v - p) / (tolerance * s)
+                if e != e:  # NaN
+                    worst = e
+                    break
+                if e > worst:
+                    worst = e
+            errors.append(worst)
         return float(max(errors, default=0.0))
 
     def _count(self, t: float, h: float, error: float) -> None:
@@ -79,3 +104,14 @@ class Adaptive(Master):
                               f"{self.min_step:g} s with error {error:.3g} x tolerance (further "
                               f"ones are counted in the statistics: accepted_above_tolerance)",
                               RuntimeWarning, stacklevel=2)
+
+
+def _evaluate(rows: list, s: float) -> list[float]:
+    """masters.history.evaluate on Taylor rows as lists: the same operations, so the same
+    floats."""
+    if len(rows) == 1:
+        return rows[0]
+    if len(rows) == 2:
+        return [a + b * s for a, b in zip(*rows)]
+    c = 0.5 * s * s
+    return [a + b * s + d * c for a, b, d in zip(*rows)]

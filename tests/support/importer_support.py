@@ -40,7 +40,7 @@ def jacobi_scene():
     """The servo press as the peers run it: Jacobi, inputs held over the step, the FMUs' default
     tolerance (1e-8), stopped after IMPORTER_STOP."""
     from crankfmu.system.load import load_scene
-    scene = load_scene(Path(__file__).resolve().parents[1] / "scenarios" / "servo_press.toml")
+    scene = load_scene(Path(__file__).resolve().parents[2] / "scenarios" / "servo_press.toml")
     scene.stop_time = IMPORTER_STOP
     scene.master.algorithm, scene.master.extrapolation = "jacobi", 0
     scene.master.fmu_tolerance = 1e-8

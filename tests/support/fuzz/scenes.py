@@ -17,7 +17,7 @@ from pathlib import Path
 
 from .toml_writer import dumps
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 ROTOR = """
 [scene]

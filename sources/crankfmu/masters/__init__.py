@@ -1,0 +1,84 @@
+"""Master algorithms, one file each on the shared base `Master` (see base.py for the contract).
+
+A new master is one new file (a `Master` subclass with its `name` and `options`) and one line
+in MASTERS below; the scene reader, the command line, the Python API, the SSP annotation and
+the runner read its declaration from here.
+"""
+from __future__ import annotations
+
+from .adaptive import Adaptive
+from .base import DivergenceError, Master
+from .gauss_seidel import GaussSeidel
+from .iterative import Iterative
+from .jacobi import Jacobi
+from .options import Option, OptionError
+
+MASTERS: dict[str, type[Master]] = {cls.name: cls for cls in (
+    GaussSeidel,
+    Jacobi,
+    Iterative,
+    Adaptive,
+)}
+
+
+def register(cls: type[Master]) -> type[Master]:
+    """Add a master class (a plug-in, or a test's example) to MASTERS; its options must not
+    redefine a key another master declares differently."""
+    _check_declaration(cls, MASTERS)
+    MASTERS[cls.name] = cls
+    return cls
+
+
+def master_class(algorithm: str) -> type[Master]:
+    try:
+        return MASTERS[algorithm]
+    except (KeyError, TypeError):
+        raise OptionError(f"{_show(algorithm)} is not one of {', '.join(MASTERS)}") from None
+
+
+def all_options() -> dict[str, Option]:
+    """Every option some master declares, by key (the command line offers each once); kept
+    until MASTERS changes (the scene's settings read options through it)."""
+    key = tuple(MASTERS.values())
+    if _ALL_OPTIONS[0] != key:
+        out: dict[str, Option] = {}
+        for cls in key:
+            for option in cls.options:
+                out.setdefault(option.name, option)
+        _ALL_OPTIONS[:] = [key, out]
+    return _ALL_OPTIONS[1]
+
+
+_ALL_OPTIONS: list = [None, {}]  # [the MASTERS classes it was made from, the options]
+
+
+def make_master(algorithm: str, system, settings) -> Master:
+    try:
+        cls = MASTERS[algorithm]
+    except KeyError:
+        raise ValueError(f"master algorithm {algorithm!r} is not available; available: "
+                         f"{', '.join(MASTERS)}") from None
+    return cls(system, settings)
+
+
+def _check_declaration(cls, masters) -> None:
+    if not isinstance(getattr(cls, "name", None), str) or cls.name in ("", "base"):
+        raise ValueError(f"master class {cls.__name__} needs a name")
+    for option in cls.options:
+        for other in masters.values():
+            theirs = {o.name: o for o in other.options}.get(option.name)
+            if theirs is not None and theirs != option:
+                raise ValueError(f"master {cls.name}: option {option.name} differs from "
+                                 f"master {other.name}'s (a key means one thing)")
+
+
+def _show(value) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:60] + "..."
+
+
+for _cls in MASTERS.values():
+    _check_declaration(_cls, MASTERS)
+
+__all__ = ["DivergenceError", "Master", "MASTERS", "Option", "OptionError", "all_options",
+           "make_master", "master_class", "register"]

@@ -1,0 +1,245 @@
+"""The contract every master algorithm implements (after scipy's OdeSolver).
+
+A master advances a wired `System` (FMUs, links, external inputs) over communication steps.
+A new master is one file with a `Master` subclass and one line in MASTERS
+(crankfmu/masters/__init__.py); README "Adding a master" walks through an example
+(tests/examples/masters/halving.py). Implementers provide:
+
+    name              the algorithm's name in scenes and on the command line (a key of MASTERS).
+    options           the [master] keys it takes, a tuple of `Option` (name, type, unit, default,
+                      allowed range, help; crankfmu.masters.options). The scene, the
+                      command line, the Python API, SSP files and the sidecar read them from
+                      here; the master reads the checked values with `self.option(name)`.
+    _step(t, h)       advance every FMU from t; on return every FMU is at t + taken and
+                      `system.outputs` holds the connected outputs at t + taken, and
+                      `self.seen[comp]` = (rows, taken): the inputs each FMU saw over the step
+                      as Taylor rows at its start (one row, held, for an FMU without companion
+                      inputs; `advance_component` fills it). Return `taken` (= h unless the
+                      class sets `variable_step`).
+    needs_rollback    True if _step calls `save_states`/`restore_states`; the base then checks
+                      canGetAndSetFMUstate for every FMU and names the one that cannot.
+    variable_step     True if the master chooses its steps: the runner then asks `next_step`
+                      for the next step to try and records at the accepted points; such a
+                      master declares the options min_step and max_step [s] (the runner and
+                      the step-count check read them).
+    startup_corrector True for a fixed-step master whose first order-2 step is repeated with
+                      interpolated inputs (`_corrected_first_step`).
+    uses_error_scale  True if the class calls `error_scale` (the base then tracks each output's
+                      largest magnitude).
+    solves_algebraic_loops  True if a converged step satisfies an algebraic loop at t + h.
+    extra_statistics  dict of master-level figures for the JSON sidecar (iterations, rejections).
+    check_options(values)   (classmethod, optional) checks between options (min_step <=
+                      max_step); raises OptionError naming the key.
+
+The base class composes parts that are each testable alone:
+    history.History, Coefficients   the last communication points; Taylor rows of the input
+                                    polynomials (extrapolation, interpolation)
+    inputs.InputFeed                rows to each FMU: companion inputs X_d1, X_d2, or the held
+                                    midpoint value for a foreign FMU (with one warning)
+    rollback.Rollback               get/set/free FMU states
+    power.PortPower                 the port energies (the run's coupling-error figure)
+    scale.ErrorScale, check_finite  what tolerances are relative to; divergence
+and provides `initialize(t0)`, the public `step(t, h)` (calls `_step`, then keeps the
+communication-point history and the port energies), the two sweeps (`parallel_sweep`: Jacobi,
+`sequential_sweep`: Gauss-Seidel), and statistics per FMU.
+
+Inputs over a step are polynomials of degree <= 2, given as Taylor rows at the step start
+(value, first and second derivative).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .history import HISTORY_DEPTH, Coefficients, History, evaluate, taylor_rows
+from .inputs import InputFeed
+from .options import Option, OptionError
+from .power import PortPower
+from .rollback import Rollback
+from .scale import RUNAWAY_LIMIT, DivergenceError, ErrorScale, check_finite
+
+__all__ = ["Coefficients", "DivergenceError", "HISTORY_DEPTH", "History", "Master",
+           "RUNAWAY_LIMIT", "evaluate", "taylor_rows"]
+
+
+class Master:
+    name = "base"
+    options: tuple[Option, ...] = ()
+    needs_rollback = False
+    variable_step = False
+    startup_corrector = False  # fixed-step masters: see _corrected_first_step
+    uses_error_scale = False   # True: keep `scale` (each output's largest magnitude) per step
+    solves_algebraic_loops = False
+
+    def __init__(self, system, settings):
+        """`settings`: the scene's [master] (crankfmu.system.scene.Master); this master
+        reads its own options from it, checked against their declaration."""
+        self.system = system
+        self.settings = settings
+        self.values = self.read_options(settings)
+        self.extrapolation = self.values.get("extrapolation", 0)
+        self.rollback = Rollback(system, self.name, self.needs_rollback)
+        self.can_rollback = self.rollback.available
+        self.history = History()
+        self.inputs = InputFeed(system)
+        self.power = PortPower(system)
+        self.scales = ErrorScale(system)
+        self.seen: dict[str, tuple] = {}
+        self.extra_statistics: dict = {}
+        self.time = None
+
+    # -- options --------------------------------------------------------------------------
+    @classmethod
+    def read_options(cls, settings) -> dict:
+        """{key: checked value} of this master's options (the declared default where the
+        settings give none); OptionError names the key."""
+        values = {}
+        for option in cls.options:
+            try:
+                values[option.name] = option.check(getattr(settings, option.name,
+                                                           option.default))
+            except OptionError as err:
+                raise OptionError(f"[master].{option.name}: {err}") from None
+        cls.check_options(values)
+        return values
+
+    @classmethod
+    def check_options(cls, values: dict) -> None:
+        """Checks between options; a subclass raises OptionError naming the key."""
+
+    def option(self, name: str):
+        return self.values[name]
+
+    # -- initialization -------------------------------------------------------------------
+    def initialize(self, t0: float) -> None:
+        """In initialization mode, pass connected values along until they settle (one sweep per
+        component covers any loop-free chain of direct feedthrough)."""
+        system = self.system
+        for comp in system.order:
+            system.set_external(comp, t0, initial=True)
+        for _ in range(len(system.order) + 1):
+            for comp in system.order:
+                system.write_inputs[comp](system.gather_inputs(comp))
+                system.refresh_outputs(comp)
+        for fmu in system.fmus.values():
+            fmu.slave.exitInitializationMode()
+        for comp in system.order:
+            system.write_inputs[comp](system.gather_inputs(comp))
+            system.refresh_outputs(comp)
+        self.check_finite(t0)
+        self._remember(t0)
+
+    # -- contract -------------------------------------------------------------------------
+    def step(self, t: float, h: float) -> float:
+        """Advance from t by h (or less, for a variable-step master); return the step taken."""
+        before = self.history.values[-1]
+        self.time = t  # where a failing FMU call happened
+        if self.startup_corrector and len(self.history.times) == 1 and self.extrapolation == 2 \
+                and self.can_rollback:
+            taken = self._corrected_first_step(t, h)
+        else:
+            taken = self._step(t, h)
+        self.power.add(taken, before, self.system.outputs, self.seen)
+        self._remember(t + taken)
+        return taken
+
+    def _step(self, t: float, h: float) -> float:
+        raise NotImplementedError
+
+    def _corrected_first_step(self, t: float, h: float) -> float:
+        """The first step of an order-2 run has only the point at t: its held inputs (error
+        O(h)) would leave a local error O(h^2) and cap the global order at 2. So it is taken
+        twice: once as usual, then rolled back and repeated with the inputs interpolated
+        linearly towards the outputs the first pass gave at t + h (error O(h^2), local O(h^3))."""
+        states = self.save_states()
+        taken = self._step(t, h)
+        newest = {c: (t + taken, v.copy()) for c, v in self.system.outputs.items()}
+        self.restore_states(states)
+        self.free_states(states)
+        coefficients = self.source_coefficients(t, 1, newest)
+        for comp in self.system.order:
+            self.advance_component(comp, t, taken, self.gather(comp, coefficients))
+        for comp in self.system.order:
+            self.system.refresh_outputs(comp)
+        self.extra_statistics["startup_corrections"] = 1
+        return taken
+
+    # -- input polynomials ----------------------------------------------------------------
+    def source_coefficients(self, t: float, order: int, newest: dict | None = None
+                            ) -> Coefficients:
+        """Taylor rows at t of every component's connected outputs (extrapolation of `order`
+        from the history; a component in `newest` (comp -> (t_new, values)) contributes that
+        point too), computed when first read."""
+        return Coefficients(self.history, t, order, newest)
+
+    def gather(self, comp: str, coefficients: dict) -> np.ndarray:
+        """Taylor rows of comp's inputs, from the rows of their sources."""
+        return self.inputs.gather(comp, coefficients)
+
+    def advance_component(self, comp: str, t: float, h: float, rows: np.ndarray) -> None:
+        """Give comp its inputs as the polynomial `rows` over [t, t + h] and step it."""
+        system = self.system
+        if system.external_varies[comp]:  # constant external inputs were written at start
+            system.set_external(comp, t)
+        seen = self.inputs.write(comp, rows)
+        if seen is None:  # a foreign FMU: the midpoint value, held
+            seen = self.inputs.write_held(comp, rows, h)
+        self.seen[comp] = (seen, h)
+        system.fmus[comp].do_step(t, h)
+
+    # -- the two sweeps -------------------------------------------------------------------
+    def parallel_sweep(self, t: float, h: float, order: int) -> None:
+        """Jacobi: every component steps from t with inputs extrapolated from the history."""
+        system = self.system
+        coefficients = self.source_coefficients(t, order)
+        for comp in system.order:
+            self.advance_component(comp, t, h, self.gather(comp, coefficients))
+        for comp in system.order:
+            system.refresh_outputs(comp)
+
+    def sequential_sweep(self, t: float, h: float, order: int, start_rows: dict | None = None
+                         ) -> None:
+        """Gauss-Seidel: components step in order; a source that already reached t + h
+        contributes that newest point (interpolation), the others are extrapolated.
+        `start_rows`: the extrapolation rows already computed (comp -> rows), reused."""
+        system = self.system
+        coefficients = self.source_coefficients(t, order)
+        if start_rows:
+            coefficients.update(start_rows)
+        for comp in system.order:
+            self.advance_component(comp, t, h, self.gather(comp, coefficients))
+            coefficients.reached(comp, t + h, system.refresh_outputs(comp))
+
+    # -- rollback -------------------------------------------------------------------------
+    def save_states(self) -> dict:
+        return self.rollback.save()
+
+    def restore_states(self, states: dict, comps=None) -> None:
+        self.rollback.restore(states, comps)
+
+    def free_states(self, states: dict) -> None:
+        self.rollback.free(states)
+
+    # -- bookkeeping ----------------------------------------------------------------------
+    def _remember(self, t: float) -> None:
+        self.history.push(t, self.system.outputs)
+        if self.uses_error_scale:
+            self.scales.update(self.system.outputs)
+
+    def error_scale(self, comp: str, values: np.ndarray) -> np.ndarray:
+        """What a tolerance is relative to: the largest magnitude the output has had so far,
+        and at least its nominal (the FMU's `nominal` attribute, else 1 in its SI unit)."""
+        return self.scales.of(comp, values)
+
+    def check_finite(self, t: float) -> None:
+        check_finite(t, self.system.outputs, self.system.out_names)
+
+    def statistics(self) -> dict:
+        """Per FMU: doStep calls and seconds, rollbacks, state saves."""
+        return {name: fmu.stats.as_dict() for name, fmu in self.system.fmus.items()}
+
+    def master_statistics(self) -> dict:
+        return {"algorithm": self.name, "extrapolation": self.extrapolation,
+                **self.extra_statistics}
+
+    def coupling_error(self) -> dict:
+        return self.power.report()
