@@ -19,7 +19,7 @@ so sampling effects are the same on both sides and only the coupling error remai
 """
 from __future__ import annotations
 
-from ...errors import CrankfmuError
+from ..errors import CrankfmuError
 
 import math
 from dataclasses import dataclass
