@@ -176,6 +176,8 @@ def _step_ladder(scene, algorithm, extrapolation, target, fmu_dir, report):
                          "step", nominal, bounds)  # the estimator of `crankfmu run`
         h = h0 / 2 ** k_new
         if est.ok and est.error <= target:
+            # the companions are the search's own runs at 2h and 4h
+            est.companion_seconds = sum(rungs[k][1].wall_seconds for k in (k_new - 1, k_new - 2))
             return rungs[k_new][1], est, _trial(scene, algorithm, extrapolation, step=h)
         if est.ok and est.error >= 0.8 * last_error:
             return _fail(report, f"{label}: the estimate stopped falling with the step "
