@@ -30,10 +30,16 @@ TOLERANCES = (1e-2, 1e-3, 1e-4)    # the default sweep of the adaptive master
 WITHIN = 3.0                       # the issue's criterion: estimate within a factor 3
 
 
+RUN_DIRS: list[Path] = []  # where load_run also looks (the fine companions' folder)
+
+
 def load_run(runs: Path, label: str):
-    csv = runs / f"{label}.csv"
-    side = runs / f"{label}.outcome.json"
-    if not csv.is_file() or not side.is_file():
+    for folder in [runs] + [d for d in RUN_DIRS if d != runs]:
+        csv = folder / f"{label}.csv"
+        side = folder / f"{label}.outcome.json"
+        if csv.is_file() and side.is_file():
+            break
+    else:
         return None, None
     outcome = json.loads(side.read_text())["outcome"]
     from crankfmu.cosim.results import read_result_csv
@@ -59,99 +65,120 @@ def ensure_companions(scene, settings, out: Path, jobs: int) -> None:
     exts = sorted({s.extrapolation for s in missing})
     print(f"  running companions: adaptive, extrapolation {exts}, tolerance {tols}", flush=True)
     run_accuracy(scene, AccuracyOptions(out_dir=out, algorithms=["adaptive"], extrapolations=exts,
-                                        tolerances=tols, jobs=jobs, progress=False))
+                                        tolerances=tols, jobs=jobs, progress=False,
+                                        estimate=False))
+
+
+FIXED = ("gauss-seidel", "jacobi", "iterative")
+
+
+def run_fine_companions(scene, companions: Path, jobs: int) -> None:
+    """The h/2 companions of the sweep's finest runs (0.25 x the scene's step), in their own
+    folder (its reference grid differs from the sweep's, so the sweep's cache stays valid)."""
+    from crankfmu.studies.accuracy import AccuracyOptions, run_accuracy
+    print(f"  running the h/2 companions of the 0.5 x step runs into {companions}", flush=True)
+    run_accuracy(scene, AccuracyOptions(out_dir=companions, algorithms=list(FIXED),
+                                        extrapolations=[0, 1, 2],
+                                        steps=[0.25 * scene.master.step], jobs=jobs,
+                                        progress=False, estimate=False))
 
 
 def rows_for_scene(scene, out: Path, jobs: int):
-    from crankfmu.cosim.estimate import RATIO_TOLERANCE, STEP_RATIO, nominal_order, richardson
+    """Per default-sweep run: (setting, true error, {variant: Estimate or None}, status)."""
+    from crankfmu.cosim.estimate import RATIO_TOLERANCE, coarse_bounds, nominal_order, richardson
     from crankfmu.masters import MASTERS
     from crankfmu.studies.accuracy import Setting
 
     metric, _ = scene_metric(scene)
     m = scene.master
-    plan = []
+    rows, adaptive_companions = [], []
     for alg in MASTERS:
         for ex in (0, 1, 2):
-            if alg == "adaptive":
-                if ex == 0:
-                    continue  # left out of the default grid (studies/accuracy)
-                for tol in TOLERANCES:  # the estimator: a finer companion; else a coarser one
-                    chain = [Setting(alg, ex, m.step, m.fmu_tolerance, tol / RATIO_TOLERANCE),
-                             Setting(alg, ex, m.step, m.fmu_tolerance, tol * RATIO_TOLERANCE)]
-                    plan.append(([Setting(alg, ex, m.step, m.fmu_tolerance, tol)] + chain,
-                                 RATIO_TOLERANCE, "tolerance", 1.0))
-            else:
-                for f in FACTORS:
-                    chain = [Setting(alg, ex, f * m.step * STEP_RATIO ** k, m.fmu_tolerance,
-                                     m.tolerance) for k in range(3)]
-                    plan.append((chain, STEP_RATIO, "step", nominal_order(ex)))
-    ensure_companions(scene, [s for chain, *_ in plan for s in chain[1:]
-                              if s.algorithm == "adaptive"], out, jobs)
-    rows = []
-    for chain, ratio, knob, nominal in plan:
-        loaded = [load_run(out / "runs", s.label) for s in chain]
-        run, outcome = loaded[0]
+            if alg == "adaptive" and ex == 0:
+                continue  # left out of the default grid (studies/accuracy)
+            knobs = TOLERANCES if alg == "adaptive" else [f * m.step for f in FACTORS]
+            for x in knobs:
+                if alg == "adaptive":
+                    at = {r: Setting(alg, ex, m.step, m.fmu_tolerance, x * r)
+                          for r in (1.0, 1 / RATIO_TOLERANCE, RATIO_TOLERANCE)}
+                    adaptive_companions += [at[1 / RATIO_TOLERANCE], at[RATIO_TOLERANCE]]
+                else:
+                    at = {r: Setting(alg, ex, x * r, m.fmu_tolerance, m.tolerance)
+                          for r in (1.0, 0.5, 2.0, 4.0)}
+                rows.append((alg, ex, at))
+    ensure_companions(scene, adaptive_companions, out, jobs)
+    table = []
+    for alg, ex, at in rows:
+        run, outcome = load_run(out / "runs", at[1.0].label)
         if outcome is None or outcome["status"] != "completed" or outcome["error"] is None:
-            rows.append((chain[0], None, None, None, None, None, outcome and outcome["status"]))
+            table.append((at[1.0], None, {}, outcome and outcome["status"]))
             continue
-        truth = outcome["error"]
-        series = [x[0] for x in loaded if x[0] is not None]
-        variants = {}
-        if knob == "tolerance":  # finer companion (chosen), coarser companion (alternative)
-            pairs = {"observed": (loaded[1][0], 1 / ratio), "nominal": (loaded[2][0], ratio)}
-            for name, (other, r) in pairs.items():
-                variants[name] = None if run is None or other is None else \
-                    richardson(metric, [run, other], r, knob, 1.0)
-        for name, use, bounds in (("observed", 3, None), ("nominal", 2, None),
-                                  ("bounded", 3, (nominal, nominal + 1))):
-            if knob == "tolerance":
-                variants.setdefault("bounded", variants["observed"])
-                break
-            if len(series) < use:
-                variants[name] = None
-                continue
-            variants[name] = richardson(metric, series[:use], ratio, knob, nominal, bounds)
-        rows.append((chain[0], truth, variants["observed"], variants["nominal"],
-                     variants["bounded"], outcome["wall_seconds"], ""))
-    return metric, rows
+        series = {r: load_run(out / "runs", s.label)[0] for r, s in at.items()}
+
+        def est(rs, ratio, knob, nominal, bounds=None):
+            runs = [series[r] for r in rs]
+            return None if any(x is None for x in runs) else \
+                richardson(metric, runs, ratio, knob, nominal, bounds)
+        if alg == "adaptive":  # a tenth of the tolerance (crankfmu's), else 10 x (p = 1)
+            finer = est((1.0, 1 / RATIO_TOLERANCE), 1 / RATIO_TOLERANCE, "tolerance", 1.0)
+            coarser = est((1.0, RATIO_TOLERANCE), RATIO_TOLERANCE, "tolerance", 1.0)
+            variants = {"fine": finer, "bounded": finer, "observed": coarser,
+                        "nominal": coarser}
+        else:
+            p0 = nominal_order(ex)
+            variants = {"fine": est((1.0, 0.5), 0.5, "step", p0),
+                        "bounded": est((1.0, 2.0, 4.0), 2.0, "step", p0, coarse_bounds(ex)),
+                        "observed": est((1.0, 2.0, 4.0), 2.0, "step", p0),
+                        "nominal": est((1.0, 2.0), 2.0, "step", p0)}
+        table.append((at[1.0], outcome["error"], variants, ""))
+    return metric, table
 
 
 def within(est, truth) -> bool:
     return est is not None and est.ok and truth > 0 and 1 / WITHIN <= est.error / truth <= WITHIN
 
 
-VARIANTS = ("bounded", "observed", "nominal")  # the first is crankfmu's estimator
+VARIANTS = ("fine", "bounded", "observed", "nominal")  # the first is crankfmu run's estimator
+LABELS = {"fine": "h/2 companion, order p0 (crankfmu run's)",
+          "bounded": "2h and 4h, order observed in [p0, p0+1] (--target's)",
+          "observed": "2h and 4h, order observed in [0.5, 5]",
+          "nominal": "2h, order p0"}
 FLOOR = 10 * 1e-8  # FLOOR_FACTOR x the FMUs' tolerance of every shipped scene (studies/accuracy)
 
 
 def table(scene, metric, rows) -> tuple[str, dict]:
-    lines = [f"#### {scene.name}", "", f"Metric: {metric.name}.", "",
-             "| master | extrap. | step or tol | true error | estimate, order in [p, p+1] (ratio, "
-             "order) | order in [0.5, 5] | nominal order p |", "|---|---|---|---|---|---|---|"]
+    lines = [f"#### {scene.name}", "", f"Metric: {metric.name}. Estimate (ratio to the true "
+             f"error, order used) per variant; adaptive master: fine = a tenth of the tolerance, "
+             f"the 2h columns = 10 x the tolerance.", "",
+             "| master | extrap. | step or tol | true error | " +
+             " | ".join(LABELS[v] for v in VARIANTS) + " |", "|---|---|---|---|" +
+             "---|" * len(VARIANTS)]
     counts = {k: 0 for k in ("completed", "above_floor") + VARIANTS +
-              tuple(f"{v}_above" for v in VARIANTS)}
-    for s, truth, obs, nom, bounded, wall, status in rows:
-        est = [bounded, obs, nom]
+              tuple(f"{v}_above" for v in VARIANTS) + tuple(f"{v}_measured" for v in VARIANTS)}
+    for s, truth, est, status in rows:
         knob = f"tol {s.tolerance:g}" if s.algorithm == "adaptive" else f"h {s.step:g}"
         if truth is None:
-            lines.append(f"| {s.algorithm} | {s.extrapolation} | {knob} | {status} | | | |")
+            lines.append(f"| {s.algorithm} | {s.extrapolation} | {knob} | {status} |" +
+                         " |" * len(VARIANTS))
             continue
         counts["completed"] += 1
         above = truth > FLOOR
         counts["above_floor"] += above
-        for name, e in zip(VARIANTS, est):
+        for name in VARIANTS:
+            e = est.get(name)
+            counts[f"{name}_measured"] += e is not None
             counts[name] += within(e, truth)
             counts[f"{name}_above"] += above and within(e, truth)
 
         def fmt(e):
             if e is None:
-                return "no companion"
+                return "no companion run"
             if not e.ok:
                 return f"none ({e.reason[:60]})"
             return (f"{e.error:.2e} ({e.error / truth:.2f}" if truth > 0 else "inf") + \
                 f", p {e.order:.2f})"
         lines.append(f"| {s.algorithm} | {s.extrapolation} | {knob} | {truth:.2e} | " +
-                     " | ".join(fmt(e) for e in est) + " |")
+                     " | ".join(fmt(est.get(v)) for v in VARIANTS) + " |")
     lines += ["", summary_text(counts)]
     return "\n".join(lines), counts
 
@@ -160,39 +187,9 @@ def summary_text(c: dict) -> str:
     n, a = c["completed"] or 1, c["above_floor"] or 1
     return (f"Within a factor {WITHIN:g} of the truth, of {c['completed']} completed runs "
             f"({c['above_floor']} with a true error above the floor {FLOOR:g}): " +
-            "; ".join(f"{v} {c[v]} ({100 * c[v] / n:.0f} %), above the floor "
-                      f"{c[v + '_above']} ({100 * c[v + '_above'] / a:.0f} %)" for v in VARIANTS))
-
-
-def finer_comparison(scene, out: Path) -> dict:
-    """The alternative of a finer companion (h/2, order p0; 2x the run's cost) against
-    crankfmu's estimator, on the fixed-step runs at 4, 2 and 1 x the scene's step (the sweep
-    has their h/2, h, 2h and 4h)."""
-    from crankfmu.cosim.estimate import order_rule, richardson
-    from crankfmu.studies.accuracy import Setting
-
-    metric, _ = scene_metric(scene)
-    m = scene.master
-    counts = {"runs": 0, "finer": 0, "crankfmu": 0}
-    for alg in ("gauss-seidel", "jacobi", "iterative"):
-        for ex in (0, 1, 2):
-            for f in (4.0, 2.0, 1.0):
-                h = f * m.step
-                loaded = [load_run(out / "runs", Setting(alg, ex, x, m.fmu_tolerance,
-                                                         m.tolerance).label)
-                          for x in (h, h / 2, 2 * h, 4 * h)]
-                (run, outcome), (fine, _), (c1, _), (c2, _) = loaded
-                if outcome is None or outcome["status"] != "completed" or \
-                        outcome["error"] is None or None in (fine, c1, c2):
-                    continue
-                truth = outcome["error"]
-                counts["runs"] += 1
-                p0, bounds = order_rule(False, ex)
-                counts["finer"] += within(richardson(metric, [run, fine], 0.5, "step", p0),
-                                          truth)
-                counts["crankfmu"] += within(richardson(metric, [run, c1, c2], 2.0, "step", p0,
-                                                        bounds), truth)
-    return counts
+            "; ".join(f"{v} {c[v]} ({100 * c[v] / n:.0f} %; {c[v + '_measured']} had their "
+                      f"companions), above the floor {c[v + '_above']} "
+                      f"({100 * c[v + '_above'] / a:.0f} %)" for v in VARIANTS))
 
 
 def main(argv=None) -> int:
@@ -203,29 +200,34 @@ def main(argv=None) -> int:
     ap.add_argument("--scenes")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--markdown", type=Path, default=None)
-    ap.add_argument("--finer", action="store_true",
-                    help="also compare with a finer companion (h/2) on the fixed-step runs")
+    ap.add_argument("--companions", type=Path,
+                    default=ROOT / "results" / "estimate_companions",
+                    help="where the h/2 companions of the finest sweep runs are (--run-fine)")
+    ap.add_argument("--run-fine", action="store_true",
+                    help="run the h/2 companions of the 0.5 x step runs first (into --companions)")
     args = ap.parse_args(argv)
     paths = sorted((ROOT / "scenarios").glob("*.toml"))
     if args.scenes:
         paths = [p for p in paths if p.stem in set(args.scenes.split(","))]
     sections, total = [], {}
-    summary = ["| scene | completed runs | within 3x: order observed in [p, p+1] (crankfmu's) "
-               "| order observed in [0.5, 5] | nominal order p | runs above the floor "
-               "| within 3x above the floor (crankfmu's) |", "|---|---|---|---|---|---|---|"]
+    summary = ["| scene | completed runs | " + " | ".join(
+        f"within 3x: {LABELS[v]}" for v in VARIANTS) + " | runs above the floor | within 3x "
+        "above the floor (crankfmu run's) |", "|---|---|" + "---|" * len(VARIANTS) + "---|---|"]
 
     def line(name, c):
         n, a = c["completed"] or 1, c["above_floor"] or 1
         return (f"| {name} | {c['completed']} | " + " | ".join(
             f"{c[v]} ({100 * c[v] / n:.0f} %)" for v in VARIANTS) +
-            f" | {c['above_floor']} | {c['bounded_above']} "
-            f"({100 * c['bounded_above'] / a:.0f} %) |")
+            f" | {c['above_floor']} | {c['fine_above']} ({100 * c['fine_above'] / a:.0f} %) |")
     for path in paths:
         scene = load_scene(path)
         out = args.out / scene.name
         if not (out / "runs").is_dir():
             print(f"== {scene.name}: no sweep in {out} (run scripts/accuracy_tables.py)")
             continue
+        if args.run_fine:
+            run_fine_companions(scene, args.companions / scene.name, args.jobs)
+        RUN_DIRS[:] = [out / "runs", args.companions / scene.name / "runs"]
         metric, rows = rows_for_scene(scene, out, args.jobs)
         text, counts = table(scene, metric, rows)
         print(text + "\n", flush=True)
@@ -235,22 +237,6 @@ def main(argv=None) -> int:
         summary.append(line(scene.name, counts))
     summary.append(line("all", total))
     print("\n".join(summary))
-    if args.finer:
-        rows = ["| scene | fixed-step runs at 4, 2, 1 x step | within 3x: crankfmu's (2h, 4h) "
-                "| finer companion (h/2, 2x the cost) |", "|---|---|---|---|"]
-        all_ = {"runs": 0, "finer": 0, "crankfmu": 0}
-        for path in paths:
-            scene = load_scene(path)
-            if (args.out / scene.name / "runs").is_dir():
-                c = finer_comparison(scene, args.out / scene.name)
-                rows.append(f"| {scene.name} | {c['runs']} | {c['crankfmu']} | {c['finer']} |")
-                for k in all_:
-                    all_[k] += c[k]
-        rows.append(f"| all | {all_['runs']} | {all_['crankfmu']} "
-                    f"({100 * all_['crankfmu'] / max(1, all_['runs']):.0f} %) | {all_['finer']} "
-                    f"({100 * all_['finer'] / max(1, all_['runs']):.0f} %) |")
-        print("\n".join(rows))
-        summary += [""] + rows
     if args.markdown:
         args.markdown.write_text("\n".join(summary) + "\n\n" + "\n\n".join(sections) + "\n")
         print(f"wrote {args.markdown}")

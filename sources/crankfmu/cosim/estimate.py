@@ -1,30 +1,28 @@
 """An estimate of a run's global error without a reference: Richardson extrapolation from
-companion runs at a coarser setting.
+companion runs of the same master at another step (or tolerance).
 
 The error is the scene's own accuracy metric (`cosim/metrics.py`: the trajectory metric or the
-event figures its [analysis] names), evaluated between the run and companion runs of the same
+event figures its [analysis] names), evaluated between the run and a companion run of the same
 master at another setting r x (step or tolerance). With a global error e(x) ~ C x^p, the
 difference between the run and its companion is d = |e(r x) - e(x)| ~ |r^p - 1| e(x), so
 
     estimate = d / |r^p - 1|.
 
-Fixed-step masters: companions at 2h and 4h (STEP_RATIO); the order is observed from them,
-p = log2(d(2h, 4h) / d(h, 2h)), clamped to [p0, p0 + 1], p0 = extrapolation + 1 the design
-order (Gauss-Seidel and the iterative master gain an order on some scenes; an observed ratio
-outside that range was noise in the measurement: grids of h and 2h meeting an event differently,
-errors at the FMUs' tolerance floor). Variable-step
-masters: one companion at 1/RATIO_TOLERANCE x the tolerance, p = 1 (error proportional to the
-tolerance); its error is small beside the run's, so the estimate is near d whatever p is (a
-coarser companion with p = 1 was off by up to 30x: the error is not a power of the tolerance).
-`scripts/error_estimate.py` measured these choices against the alternatives over the accuracy
-sweeps (README, "Error estimate").
+`crankfmu run`: one finer companion, at h/2 (fixed step, p = p0 = extrapolation + 1: the
+estimate is d 2^p / (2^p - 1), between 1.07 d and 2 d whatever p is) or at a tenth of a
+variable-step master's tolerance (p = 1: about 1.1 d). The finer run is nearer the asymptotic
+range than the run, so d measures the run's own error; coarse companions (2h and 4h, the order
+observed from the three runs) were cheaper but off more often: scripts/error_estimate.py
+measured the variants over the accuracy sweeps (README, "How wrong is a run, without a
+reference"). The `--target` search (cosim/target.py) uses the coarse form on its own runs
+(`richardson` with two companions and `coarse_bounds`; `richardson_steps` for any step ratios).
 
-Cost: fixed step, 1/2 + 1/4 of the run's communication steps (0.75 x the run); variable step,
-the finer run (about 10^(1/(extrapolation + 1)) x the run's steps). When it is wrong: the
-companions count other events than the run (no estimate, the reason says so), a companion is
-unstable or stopped (no estimate), the run sits at the FMUs' tolerance floor (the difference is
-solver noise), or the coarse companions are outside the asymptotic range (unstable settings:
-the observed order, hence the estimate, is then off).
+Cost: the companion takes twice the run's communication steps (fixed step) or the steps of a
+tenth of the tolerance (about 10^(1/(extrapolation + 1)) x); the FMUs' own integration does not
+grow with the step count, so the wall time grows less (README). When it is wrong: the
+companion counts other events than the run (no estimate, the reason says so) or stops (no
+estimate), the run sits at the FMUs' tolerance floor (the difference is solver noise), an input
+is sampled off the step grid (the error does not follow a power of the step).
 """
 from __future__ import annotations
 
@@ -35,9 +33,9 @@ import numpy as np
 
 from .metrics import Metric, MetricError, ReferenceSamples
 
-STEP_RATIO = 2.0          # companion step / run step
+STEP_RATIO = 2.0          # run step / companion step (and the --target search's rungs)
 RATIO_TOLERANCE = 10.0    # variable-step master: run tolerance / companion tolerance
-ORDER_MIN, ORDER_MAX = 0.5, 5.0  # clamp of the observed order (see module docstring)
+ORDER_MIN, ORDER_MAX = 0.5, 5.0  # default clamp of an observed order (coarse_bounds narrows it)
 
 
 @dataclass
@@ -45,7 +43,7 @@ class Estimate:
     """The estimated global error of one run in the scene's metric; `error` is nan when there
     is none, and `reason` says why."""
     error: float = math.nan
-    order: float = math.nan         # p used in d / (r^p - 1)
+    order: float = math.nan         # p used in d / |r^p - 1| [1]
     order_source: str = ""          # "observed" (from the second companion) or "nominal"
     ratio: float = STEP_RATIO
     knob: str = "step"              # what the companions vary: "step" or "tolerance"
@@ -73,21 +71,26 @@ def nominal_order(extrapolation: int) -> float:
 
 
 def order_rule(variable_step: bool, extrapolation: int) -> tuple[float, tuple | None]:
-    """(nominal order, bounds of the observed order) of crankfmu's estimator: fixed step, the
-    order observed from the companions within [p, p + 1], p = extrapolation + 1 (Gauss-Seidel
-    and the iterative master gain an order on some scenes; outside that range the observed
-    ratio was noise: scripts/error_estimate.py); variable step, p = 1."""
-    if variable_step:
-        return 1.0, None
-    p = nominal_order(extrapolation)
-    return p, (p, p + 1.0)
+    """(order, bounds of an observed order) of `crankfmu run`'s estimator: one companion, so
+    the order is the design order p0 = extrapolation + 1 (fixed step) or 1 (variable step)."""
+    return (1.0 if variable_step else nominal_order(extrapolation)), None
 
 
-def difference(metric: Metric, fine: tuple, coarse: tuple) -> tuple[float, str]:
-    """(metric of `coarse` against `fine` as its reference, reason if none). Runs are
-    (times [s], {column: values}); the metric looks `fine` up at `coarse`'s record times (exact
-    grid points when the coarse grid is a subset of the fine one, as for steps h and 2h).
-    Infinite with the reason when the runs count different events."""
+def coarse_bounds(extrapolation: int) -> tuple[float, float]:
+    """Bounds of the order observed from companions at 2h and 4h (the --target search):
+    [p0, p0 + 1] (Gauss-Seidel and the iterative master gain an order on some scenes; outside
+    that range the observed ratio was noise: scripts/error_estimate.py)."""
+    p0 = nominal_order(extrapolation)
+    return p0, p0 + 1.0
+
+
+def difference(metric: Metric, a: tuple, b: tuple) -> tuple[float, str]:
+    """(the metric between runs `a` and `b`, reason if none). Runs are (times [s], {column:
+    values}); the one with more record points serves as the reference, looked up at the other's
+    record times (exact grid points when one grid is a subset of the other, as for steps h and
+    2h; else a cubic spline through the denser grid). Infinite with the reason when the runs
+    count different events."""
+    fine, coarse = (a, b) if len(a[0]) >= len(b[0]) else (b, a)
     t_c, cols_c = coarse
     t_f, cols_f = fine
     ref = ReferenceSamples(np.asarray(t_f, dtype=float), cols_f)
@@ -134,10 +137,11 @@ def richardson(metric: Metric, runs: list[tuple], ratio: float, knob: str,
 
 def companion_knobs(algorithm_variable_step: bool, step: float, tolerance: float
                     ) -> tuple[str, float, list[float]]:
-    """(knob, ratio, companion values) for a run at `step` and `tolerance`."""
+    """(knob, ratio, companion values) of `crankfmu run`'s estimate for a run at `step` and
+    `tolerance`: a finer companion, at half the step or a tenth of the tolerance."""
     if algorithm_variable_step:
         return "tolerance", 1.0 / RATIO_TOLERANCE, [tolerance / RATIO_TOLERANCE]
-    return "step", STEP_RATIO, [step * STEP_RATIO, step * STEP_RATIO ** 2]
+    return "step", 1.0 / STEP_RATIO, [step / STEP_RATIO]
 
 
 # -- helpers of a run's estimate (the companions are run by cosim.runner.estimate_run) ---------

@@ -4,8 +4,10 @@ global error without a reference, from the error estimate (cosim/estimate.py).
 Fixed-step masters: two runs at a coarse step h0 = the scene's step x START_FACTOR and h0/2
 give a first estimate (the design order p0 = extrapolation + 1); the step h that would meet
 target x SAFETY is predicted from it (as h0 / 2^k, so every step is a rung of one ladder) and
-run with its companions 2h and 4h (those not run yet); the run's estimate is then exactly the
-one `crankfmu run` reports (cosim.estimate.richardson: order observed within [p0, p0 + 1]).
+run with its companions 2h and 4h (those not run yet); the run's estimate is Richardson from
+those two coarser runs with the order observed within [p0, p0 + 1] (cosim.estimate.richardson,
+coarse_bounds: the search's own runs are the companions, at no extra cost; `crankfmu run`
+uses a finer companion instead, which was right more often but would cost another run here).
 The search stops at the first run whose estimate meets the target, else predicts again from
 it. Typically three runs (two of them coarse) when the prediction lands two halvings below the
 start, five when it jumps further. No run is repeated: the accepted run is written as it ran.
@@ -28,8 +30,9 @@ from dataclasses import dataclass, field
 
 from ..errors import CrankfmuError
 
-from .estimate import (Estimate, companion_knobs, order_rule, recorder_series, richardson,
-                       richardson_steps, scene_metric, with_metric_record)
+from .estimate import (Estimate, coarse_bounds, companion_knobs, nominal_order,
+                       recorder_series, richardson, richardson_steps, scene_metric,
+                       with_metric_record)
 
 START_FACTOR = 128.0     # the first step, x the scene's step: coarse runs are cheap where the
                          # cost follows the step; an unstable start costs a run (measured
@@ -136,7 +139,7 @@ def _step_ladder(scene, algorithm, extrapolation, target, fmu_dir, report):
     h0 / 2^k; `rungs` maps k to the run's (series, result)."""
     metric = scene_metric(scene)
     label = f"{algorithm}, extrapolation {extrapolation}"
-    nominal, bounds = order_rule(False, extrapolation)
+    nominal, bounds = nominal_order(extrapolation), coarse_bounds(extrapolation)
     h_min = scene.master.step * MIN_STEP_FACTOR
     # at least MIN_START_STEPS steps over the run: a step longer than the run is no step
     # (a power of 2 x the scene's step, so the steps tried are those of the accuracy sweep)
