@@ -192,6 +192,23 @@ def summary_text(c: dict) -> str:
                       f"({100 * c[v + '_above'] / a:.0f} %)" for v in VARIANTS))
 
 
+def plot_scene(scene, rows, path: Path) -> None:
+    """The estimate-against-truth plot of `crankfmu accuracy`, from these rows."""
+    from crankfmu.studies.accuracy import Outcome
+    from crankfmu.studies.accuracy.report import plot_estimates
+    outcomes = []
+    for s, truth, est, _ in rows:
+        if truth is None:
+            continue
+        fine = est.get("fine")
+        o = Outcome(s, "tolerance" if s.algorithm == "adaptive" else "step", truth)
+        o.extra["estimated_error"] = fine.error if fine is not None and fine.ok else None
+        outcomes.append(o)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    plot_estimates(path, outcomes, f"{scene.name}: estimated against true error, default "
+                                   f"sweep, t = {scene.start_time:g} to {scene.stop_time:g} s")
+
+
 def main(argv=None) -> int:
     from crankfmu.system.load import load_scene
 
@@ -203,6 +220,8 @@ def main(argv=None) -> int:
     ap.add_argument("--companions", type=Path,
                     default=ROOT / "results" / "estimate_companions",
                     help="where the h/2 companions of the finest sweep runs are (--run-fine)")
+    ap.add_argument("--plots", type=Path, default=None,
+                    help="folder for <scene>_estimate_vs_error.png (crankfmu run's estimate)")
     ap.add_argument("--run-fine", action="store_true",
                     help="run the h/2 companions of the 0.5 x step runs first (into --companions)")
     args = ap.parse_args(argv)
@@ -230,6 +249,8 @@ def main(argv=None) -> int:
         RUN_DIRS[:] = [out / "runs", args.companions / scene.name / "runs"]
         metric, rows = rows_for_scene(scene, out, args.jobs)
         text, counts = table(scene, metric, rows)
+        if args.plots:
+            plot_scene(scene, rows, args.plots / f"{scene.name}_estimate_vs_error.png")
         print(text + "\n", flush=True)
         sections.append(text)
         for k, v in counts.items():
