@@ -274,6 +274,9 @@ def _run(scene, options, out, log, fmus, system, master, recorder, readers, inte
                      master.master_statistics(), master.coupling_error(), metadata, cpu)
 
 
+FLOOR_FACTOR = 10.0  # an estimate below this x fmu_tolerance is flagged (the studies' floor)
+
+
 def estimate_run(scene, run_series: tuple, fmu_dir=None):
     """Run the companions of `scene` (its master at 2h and 4h, or at a tenth of a
     variable-step master's tolerance) and estimate the error of the run recorded in
@@ -302,6 +305,10 @@ def estimate_run(scene, run_series: tuple, fmu_dir=None):
         series.append(recorder_series(result.recorder))
     est = richardson(metric, series, ratio, knob, *order_rule(variable, m.extrapolation))
     est.companion_seconds = seconds
+    if est.ok and est.error < FLOOR_FACTOR * m.fmu_tolerance:  # say it: no number hides it
+        est.reason = "; ".join(filter(None, [est.reason, (
+            f"below {FLOOR_FACTOR:g} x fmu_tolerance: the FMUs' own solver error, which a "
+            f"companion with the same fmu_tolerance does not see, may be larger")]))
     return est
 
 
