@@ -1,9 +1,10 @@
-"""The error estimate of each sweep run (crankfmu.cosim.estimate), from its companions' CSVs in
+"""The error estimate of each sweep run (crankfmu.cosim.estimate), from its companion's CSV in
 runs/: the same Richardson estimate `crankfmu run` reports, set beside the true error.
 
-A run's companions (2h and 4h; a tenth of a variable-step master's tolerance) are mostly runs of
-the sweep itself (the default steps are 4, 2, 1, 0.5 x the scene's: only 8 and 16 x are added);
-the others are run with the sweep and left out of its table.
+A run's companion (half its step; a tenth of a variable-step master's tolerance) is mostly a
+run of the sweep itself (the default steps are 4, 2, 1, 0.5 x the scene's: only 0.25 x is
+added, and the adaptive master's tenths); the others are run with the sweep and left out of
+its table.
 """
 from __future__ import annotations
 
