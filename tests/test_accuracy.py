@@ -11,7 +11,7 @@ import pytest
 
 from crankfmu.studies.accuracy import (Outcome, Setting, cheapest, fewest_steps, make_metric,
                                        observed_order, steady_figures)
-from crankfmu.studies.accuracy.metrics import MetricError, ReferenceSamples
+from crankfmu.cosim.metrics import MetricError, ReferenceSamples
 from crankfmu.studies.accuracy.sweep import load_or_solve_reference, orders
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"

@@ -1,4 +1,4 @@
-"""Event-aware accuracy (crankfmu.studies.accuracy.events, `crankfmu accuracy` on the hybrid scenes):
+"""Event-aware accuracy (crankfmu.cosim.events, `crankfmu accuracy` on the hybrid scenes):
 the per-event figures, an external --reference file, resuming a sweep, unstable runs, and the
 convergence of event figures through the FMUs on short runs (the full tables are made by
 scripts/accuracy_tables.py)."""
@@ -13,8 +13,8 @@ import pytest
 from tests.conftest import SCENARIOS
 from crankfmu.studies.accuracy import (AccuracyOptions, EventSpec, Setting, event_error,
                                        parse_event_specs, run_accuracy)
-from crankfmu.studies.accuracy.events import EventSpecError, event_values
-from crankfmu.studies.accuracy.metrics import MetricError
+from crankfmu.cosim.events import EventSpecError, event_values
+from crankfmu.cosim.metrics import MetricError
 from crankfmu.system.load import load_scene
 
 
@@ -147,7 +147,7 @@ def test_hammer_blow_figures_converge_with_the_step(tmp_path, hybrid_fmus):
 def test_unstable_runs_are_reported_as_such():
     """A run whose error exceeds 1 or that stopped is 'unstable', never a number in the table
     or the CSV (the figure or the reason goes into the status)."""
-    from crankfmu.studies.accuracy.metrics import ReferenceSamples, make_metric
+    from crankfmu.cosim.metrics import ReferenceSamples, make_metric
     from crankfmu.studies.accuracy.report import _row, format_outcome
     from crankfmu.studies.accuracy.sweep import _outcome
     from crankfmu.studies.executor import RunOutput, RunTask
@@ -173,7 +173,7 @@ def test_unstable_runs_are_reported_as_such():
 def test_a_run_with_an_extra_blow_says_so(tmp_path):
     """A blow more than the reference by the stop time: 'events differ', no number, not
     'unstable' (the run is stable; its blows drifted)."""
-    from crankfmu.studies.accuracy.metrics import ReferenceSamples, make_metric
+    from crankfmu.cosim.metrics import ReferenceSamples, make_metric
     from crankfmu.studies.accuracy.report import _row
     from crankfmu.studies.accuracy.sweep import _outcome
     from crankfmu.studies.executor import RunOutput, RunTask

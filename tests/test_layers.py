@@ -150,8 +150,8 @@ def test_one_place_maps_errors_to_exit_status_2():
 def test_user_errors_derive_from_the_one_base(name):
     import crankfmu.errors as errors
     from crankfmu.reference.composed import CompositionError
-    from crankfmu.studies.accuracy.events import EventSpecError
-    from crankfmu.studies.accuracy.metrics import MetricError
+    from crankfmu.cosim.events import EventSpecError
+    from crankfmu.cosim.metrics import MetricError
     from crankfmu.studies.structure.description import MechanismError
     from crankfmu.studies.sweep import SweepError
     found = {**vars(errors), "CompositionError": CompositionError, "MetricError": MetricError,

@@ -39,6 +39,12 @@ class Result:
     analysis: dict = field(default_factory=dict)        # the scene's [analysis] roles, if any
 
     @property
+    def estimated_error(self) -> float | None:
+        """The run's estimated global error in the scene's accuracy metric
+        (crankfmu.cosim.estimate; metadata["error_estimate"] says how and, if None, why not)."""
+        return (self.metadata.get("error_estimate") or {}).get("estimated_error")
+
+    @property
     def names(self) -> list[str]:
         """The recorded variables ("comp.var"), without "time"."""
         return list(self.values.dtype.names[1:])
@@ -114,24 +120,51 @@ def prepare(scene, *, stop_time=None, step=None, algorithm=None, parameters=None
 
 def simulate(scene, *, stop_time=None, step=None, algorithm=None, parameters=None,
              inputs=None, out=None, progress=False, plot=False, fmu_dir=None, log=False,
-             **master_options) -> Result:
+             estimate=True, target=None, **master_options) -> Result:
     """Co-simulate the scene with its master (crankfmu.cosim.runner.run_scene) and return the
     recorded values. `out`: a CSV path to write (the JSON sidecar beside it, and with
     `plot=True` a PNG); nothing is written without it. `fmu_dir`: the built FMUs (default:
     fmus/ beside the scene's scenarios/ folder, else the package's build folder; stale or
     missing FMUs are built there, never into the working folder). `master_options`: the
-    chosen master's own options (extrapolation=2, tolerance=1e-4, ...; see `prepare`)."""
+    chosen master's own options (extrapolation=2, tolerance=1e-4, ...; see `prepare`).
+    `estimate`: run the companions of the error estimate (Result.estimated_error; about 0.75 x
+    the run's cost). `target` (or the scene's [master].target): the global error wanted;
+    master, extrapolation and step are chosen from the estimate (crankfmu.cosim.target);
+    raises crankfmu.cosim.target.TargetNotMet saying why when no setting meets it."""
     from .cosim.runner import RunOptions, run_scene
     scene = prepare(scene, stop_time=stop_time, step=step, algorithm=algorithm,
                     parameters=parameters, inputs=inputs, **master_options)
+    if target is not None:
+        set_value(scene, "master.target", target, "target")
+    if scene.master.target is not None:
+        return _simulate_target(scene, out, plot, fmu_dir)
     result = run_scene(scene, RunOptions(out=Path(out) if out is not None else None,
                                          plot=plot, fmu_dir=fmu_dir, progress=progress,
-                                         verbose_log=log))
+                                         verbose_log=log, estimate=estimate))
     m = scene.master
     return _result(result.recorder, result.metadata,
                    {"csv": result.csv, "sidecar": result.sidecar, "png": result.png},
                    f"{scene.name}: {m.algorithm}, step {m.step:g} s", result.statistics,
                    result.coupling_error, scene)
+
+
+def set_value(scene, ref, value, key):
+    from .system.scene import set_value as _set
+    _set(scene, ref, value, key)
+
+
+def _simulate_target(scene, out, plot, fmu_dir) -> Result:
+    from .cosim.target import search, write_chosen
+    result, report = search(scene, scene.master.target, fmu_dir)
+    result.metadata["error_estimate"] = report.estimate.to_json()
+    result.metadata["target"] = report.to_json()
+    if out is not None:
+        write_chosen(scene, result, report, Path(out), plot)
+    m = result.metadata["master"]
+    return _result(result.recorder, result.metadata,
+                   {"csv": result.csv, "sidecar": result.sidecar, "png": result.png},
+                   f"{scene.name}: {m['algorithm']}, step {m['step']:g} s (target "
+                   f"{report.target:g})", result.statistics, result.coupling_error, scene)
 
 
 def reference(scene, *, stop_time=None, parameters=None, inputs=None, rtol=None, method=None,

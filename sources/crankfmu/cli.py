@@ -72,6 +72,11 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
                           "and the PNG go beside it",
                        "also write a PNG of the recorded variables")
     p.add_argument("--log", action="store_true", help="print the FMUs' log messages")
+    p.add_argument("--target", type=float, metavar="TOL",
+                   help="the global error wanted (the scene's accuracy metric): choose master, "
+                        "extrapolation and step from the error estimate ([master].target)")
+    p.add_argument("--no-estimate", action="store_true",
+                   help="skip the error estimate (its companion runs cost about 0.75 x the run)")
 
 
 def load_with_options(args):
@@ -117,17 +122,50 @@ def _master_options_from(args, scene) -> None:
 
 def cmd_run(args) -> int:
     from .cosim.runner import RunOptions, run_scene
+    from .system.scene import _number
 
     scene = load_with_options(args)
     out = args.out or Path("results") / f"{scene.name}.csv"
+    if args.target is not None:
+        scene.master.target = _number(scene.path, "--target", args.target, positive=True,
+                                      maximum=1.0)
+    if scene.master.target is not None:
+        return _run_target(scene, out, args)
     result = run_scene(scene, RunOptions(out=out, plot=args.plot, fmu_dir=args.fmus,
                                          progress=False if args.no_progress else None,
-                                         verbose_log=args.log))
-    m = scene.master
+                                         verbose_log=args.log, estimate=not args.no_estimate))
+    _print_run(scene, result)
+    return 0
+
+
+def _run_target(scene, out: Path, args) -> int:
+    """--target: search the setting (crankfmu.cosim.target), write the chosen run."""
+    from .cosim.target import TargetNotMet, search, write_chosen
+    try:
+        result, report = search(scene, scene.master.target, args.fmus)
+    except TargetNotMet as err:
+        print(f"{scene.name}: target not met. {err}")
+        return 1
+    write_chosen(scene, result, report, out, args.plot)
+    m = result.metadata["master"]
+    knob = f"tolerance {report.tolerance:g}" if m["step"] != report.step or \
+        m["algorithm"] == "adaptive" else f"step {m['step']:g} s"
+    print(f"{scene.name}: target {report.target:g} met by {m['algorithm']}, extrapolation "
+          f"{m.get('extrapolation')}, {knob}; the search ran {len(report.runs)} runs in "
+          f"{report.wall_seconds:.2f} s wall")
+    _print_run(scene, result, report.estimate)
+    return 0
+
+
+def _print_run(scene, result, estimate=None) -> None:
+    from .cosim.estimate import format_estimate
     from .masters import MASTERS
-    size = "variable steps" if MASTERS[m.algorithm].variable_step else f"steps of {m.step:g} s"
-    own = ", ".join(f"{o.name} {getattr(m, o.name):g}" for o in MASTERS[m.algorithm].options)
-    print(f"{scene.name}: {result.steps} {size} with {m.algorithm}" + (f" ({own})" if own else "")
+    m = result.metadata.get("master", {})  # the run's setting (--target chooses it)
+    cls = MASTERS[m["algorithm"]]
+    size = "variable steps" if cls.variable_step else f"steps of {m['step']:g} s"
+    own = ", ".join(f"{o.name} {m[o.name]:g}" for o in cls.options if o.name in m)
+    print(f"{scene.name}: {result.steps} {size} with {m['algorithm']}" + (f" ({own})" if own
+                                                                           else "")
           + f" in {result.wall_seconds:.2f} s wall")
     for name, st in result.statistics.items():
         print(f"  {name}: {st['doStep_calls']} doStep calls, {st['doStep_seconds']:.3f} s, "
@@ -142,8 +180,10 @@ def cmd_run(args) -> int:
         print(f"  coupling error at {port['driver']} -> {port['receiver']}: energy mismatch "
               f"{port['mismatch_J']:.4g} J" + (f" ({rel:.3g} of {port['energy_throughput_J']:.4g}"
                                                   f" J through the port)" if rel is not None else ""))
+    estimate = estimate or result.estimate
+    if estimate is not None:
+        print("  " + format_estimate(estimate))
     print(f"wrote {result.csv}, {result.sidecar}" + (f", {result.png}" if result.png else ""))
-    return 0
 
 
 def cmd_build(args) -> int:

@@ -66,6 +66,9 @@ def register(sub) -> None:
                    help="recorded variables of the metric (default: the *.w_crank ones, else all)")
     p.add_argument("--cycles", type=int, default=1, help="revolutions of metric steady")
     p.add_argument("--rtol", type=float, default=1e-10, help="reference solver tolerance")
+    p.add_argument("--no-estimate", action="store_true",
+                   help="no estimated_error column (its companion runs at 8 and 16 x the "
+                        "scene's step and a tenth of the adaptive tolerances are not run)")
     p.add_argument("--floor-factor", type=float, default=10.0,
                    help="orders use errors above this x the FMU tolerance (default 10)")
     from .sweep import add_executor_options
@@ -88,7 +91,8 @@ def run_accuracy_command(args) -> int:
         cycles=args.cycles, target=args.target, reference_rtol=args.rtol,
         floor_factor=args.floor_factor, fmu_dir=args.fmus,
         progress=False if args.no_progress else None, jobs=args.jobs, scheduler=args.scheduler,
-        reference_csv=args.reference, resume=not args.fresh, report=_printer())
+        reference_csv=args.reference, resume=not args.fresh, report=_printer(),
+        estimate=not args.no_estimate)
     if args.tolerances:
         options.tolerances = args.tolerances
     _check_options(options)
@@ -103,8 +107,22 @@ def run_accuracy_command(args) -> int:
     print(format_orders(result.orders))
     _print_choice("cheapest in wall time", result.cheapest, args.target)
     _print_choice("fewest doStep calls", result.fewest_steps, args.target)
-    print(f"wrote {result.csv}, {result.png}")
+    if options.estimate:
+        _print_estimates(result.outcomes)
+    print(f"wrote {result.csv}, {result.png}" + (
+        f", {result.csv.with_name('estimate_vs_error.png')}" if options.estimate else ""))
     return 0
+
+
+def _print_estimates(outcomes) -> None:
+    from ..studies.accuracy.estimates import estimate_ratio
+    ratios = [r for r in (estimate_ratio(o) for o in outcomes) if r == r]
+    inside = sum(1 for r in ratios if 1 / 3 <= r <= 3)
+    completed = sum(1 for o in outcomes if o.ok)
+    print(f"error estimate (Richardson, companion runs): within a factor 3 of the true error in "
+          f"{inside} of {completed} completed runs" + (
+              f" (estimate / error from {min(ratios):.2g} to {max(ratios):.2g})" if ratios
+              else ""))
 
 
 def _printer():

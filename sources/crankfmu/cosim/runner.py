@@ -15,7 +15,7 @@ from lxml import etree
 from ..errors import CrankfmuError, InterruptedRun
 from ..system.scene import Scene, SceneError, check_run_size
 from ..fmu.instance import FmuInstance, LogCollector
-from ..masters import DivergenceError, OptionError, make_master
+from ..masters import MASTERS, DivergenceError, OptionError, make_master
 from .results import (Recorder, column_units, normalize_unit, plot, versions, write_csv,
                       write_sidecar)
 from ..system.wiring import (System, check_components, check_links, check_loops, check_physics,
@@ -60,6 +60,7 @@ class RunResult:
     coupling_error: dict = field(default_factory=dict)
     metadata: dict = field(default_factory=dict)  # the sidecar's content (also when not written)
     cpu_seconds: float = 0.0  # this process's CPU from initialization to the FMUs' release
+    estimate: object | None = None  # cosim.estimate.Estimate when RunOptions.estimate
 
 
 @dataclass
@@ -70,6 +71,9 @@ class RunOptions:
     progress: bool | None = None  # None: a bar when stderr is a terminal
     verbose_log: bool = False
     extra_sidecar: dict = field(default_factory=dict)
+    # estimate the run's global error from companion runs (cosim/estimate.py): the sidecar's
+    # "error_estimate"; off for the runs of studies, which compare against a reference
+    estimate: bool = False
 
 
 def load_fmus(scene: Scene, fmu_dir: Path, log: LogCollector) -> dict[str, FmuInstance]:
@@ -166,6 +170,9 @@ def run_scene(scene: Scene, options: RunOptions | None = None) -> RunResult:
     and raises RunError (RunInterrupted for Ctrl-C)."""
     options = options or RunOptions()
     check_run_size(scene)
+    if options.estimate:
+        from .estimate import with_metric_record
+        scene = with_metric_record(scene)
     out = Path(options.out) if options.out is not None else None
     log = LogCollector(echo=options.verbose_log)
     fmus = load_fmus(scene, options.fmu_dir or default_fmu_dir(scene), log)
@@ -187,7 +194,20 @@ def run_scene(scene: Scene, options: RunOptions | None = None) -> RunResult:
         close_fmus(fmus)
         raise
     with _Interrupt() as interrupt:
-        return _run(scene, options, out, log, fmus, system, master, recorder, readers, interrupt)
+        result = _run(scene, options, out, log, fmus, system, master, recorder, readers,
+                      interrupt)
+    if options.estimate:
+        _add_estimate(scene, options, result)
+    return result
+
+
+def _add_estimate(scene: Scene, options: RunOptions, result: RunResult) -> None:
+    """Run the companions, put the estimate in the result and its sidecar."""
+    from .estimate import recorder_series
+    result.estimate = estimate_run(scene, recorder_series(result.recorder), options.fmu_dir)
+    result.metadata["error_estimate"] = result.estimate.to_json()
+    if result.sidecar is not None:
+        write_sidecar(result.sidecar, result.metadata)
 
 
 def _run(scene, options, out, log, fmus, system, master, recorder, readers, interrupt):
@@ -252,6 +272,44 @@ def _run(scene, options, out, log, fmus, system, master, recorder, readers, inte
              plot_roles(scene), reference)
     return RunResult(out, sidecar, png, recorder, statistics, wall, step,
                      master.master_statistics(), master.coupling_error(), metadata, cpu)
+
+
+FLOOR_FACTOR = 10.0  # an estimate below this x fmu_tolerance is flagged (the studies' floor)
+
+
+def estimate_run(scene, run_series: tuple, fmu_dir=None):
+    """Run the companions of `scene` (its master at 2h and 4h, or at a tenth of a
+    variable-step master's tolerance) and estimate the error of the run recorded in
+    `run_series` (times, columns)."""
+    from .estimate import (Estimate, companion_knobs, companion_scene, order_rule,
+                           recorder_series, richardson, scene_metric)
+    from .metrics import MetricError
+    m = scene.master
+    variable = bool(getattr(MASTERS.get(m.algorithm), "variable_step", False))
+    knob, ratio, values = companion_knobs(variable, m.step, m.tolerance)
+    try:
+        metric = scene_metric(scene)
+    except MetricError as err:
+        return Estimate(ratio=ratio, knob=knob, reason=str(err))
+    series, seconds = [run_series], 0.0
+    for value in values:
+        t0 = time.perf_counter()
+        try:
+            result = run_scene(companion_scene(scene, knob, value),
+                               RunOptions(out=None, fmu_dir=fmu_dir, progress=False))
+        except RunError as err:
+            return Estimate(ratio=ratio, knob=knob, companion_seconds=seconds +
+                            time.perf_counter() - t0,
+                            reason=f"the companion run at {knob} {value:g} stopped: {err}")
+        seconds += time.perf_counter() - t0
+        series.append(recorder_series(result.recorder))
+    est = richardson(metric, series, ratio, knob, *order_rule(variable, m.extrapolation))
+    est.companion_seconds = seconds
+    if est.ok and est.error < FLOOR_FACTOR * m.fmu_tolerance:  # say it: no number hides it
+        est.reason = "; ".join(filter(None, [est.reason, (
+            f"below {FLOOR_FACTOR:g} x fmu_tolerance: the FMUs' own solver error, which a "
+            f"companion with the same fmu_tolerance does not see, may be larger")]))
+    return est
 
 
 def plot_roles(scene: Scene) -> dict | None:

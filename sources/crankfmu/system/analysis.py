@@ -10,7 +10,7 @@ ROLES = ("crank_angle", "crank_speed", "drive_torque", "drive_power")
 OPTIONAL = ("load_torque",)
 NUMBERS = ("from_time",)
 LISTS = ("events",)
-ACCURACY = ("metric",)  # the metric the scene is judged by (crankfmu.studies.accuracy.metrics)
+ACCURACY = ("metric",)  # the metric the scene is judged by (crankfmu.cosim.metrics)
 
 
 def analysis_roles(scene) -> dict:
@@ -39,7 +39,7 @@ def analysis_roles(scene) -> dict:
         raise SceneError(scene.path, "[analysis].events", "must be a list of "
                          "\"component.variable\" (values reported at the run's end)")
     # an entry is "comp.var" or { variable = "comp.var", per = "comp.counter" } (a figure per
-    # event for the accuracy metric, crankfmu.studies.accuracy.events); here: the variable's end value
+    # event for the accuracy metric, crankfmu.cosim.events); here: the variable's end value
     out["events"] = [_variable_ref(scene.path, "[analysis].events",
                                    v.get("variable") if isinstance(v, dict) else v,
                                    scene.components) for v in events]

@@ -7,7 +7,8 @@
                   refused up front), and the chosen algorithm's own options, as its master
                   declares them (crankfmu.masters: extrapolation; tolerance,
                   max_iterations for iterative; tolerance, min_step [s], max_step [s] for
-                  adaptive; `crankfmu run --help` lists them)
+                  adaptive; `crankfmu run --help` lists them); target (a requested global
+                  error: `crankfmu run` then chooses master, extrapolation and step)
     [components.NAME]  fmu = "DcServoMotor" (built FMU name) or "path/to/file.fmu",
                        parameters = {name = value}, effects = ["name", ...]
     [[connections]]    from = "comp.output", to = "comp.input"
@@ -78,7 +79,7 @@ class InputSignal:
         return float(np.interp(t, self.times, self.values))
 
 
-COMMON_MASTER_KEYS = ("algorithm", "step", "fmu_tolerance", "order", "max_steps")
+COMMON_MASTER_KEYS = ("algorithm", "step", "fmu_tolerance", "order", "max_steps", "target")
 
 
 @dataclass(eq=False)
@@ -93,6 +94,9 @@ class Master:
     fmu_tolerance: float = 1e-8   # each FMU's internal solver (fmi2SetupExperiment)
     order: list[str] = field(default_factory=list)
     max_steps: int = MAX_STEPS    # communication steps a run may take (checked before it starts)
+    # the requested global error (the scene's accuracy metric): `crankfmu run` then chooses
+    # master, extrapolation and step from the error estimate (crankfmu.cosim.target)
+    target: float | None = None
     options: dict = field(default_factory=dict)
 
     def __getattr__(self, name: str):
@@ -297,6 +301,8 @@ def _parse_common_master_keys(path, raw: dict, m: Master) -> None:
                                maximum=10**12)
     if "order" in raw:
         m.order = _list(path, "[master].order", raw["order"], "component names")
+    if "target" in raw:  # a relative error
+        m.target = _number(path, "[master].target", raw["target"], positive=True, maximum=1.0)
 
 
 def check_run_size(scene: "Scene", key: str = "[master].step") -> None:

@@ -10,11 +10,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .events import EventError, EventSpec, event_error, event_errors, parse_event_specs
-from .metrics import (METRICS, Metric, MetricError, make_metric, observed_order, scene_event_specs,
+from ...cosim.events import EventError, EventSpec, event_error, event_errors, parse_event_specs
+from ...cosim.metrics import (METRICS, Metric, MetricError, make_metric, observed_order, scene_event_specs,
                       scene_metric_name, steady_figures)
-from .report import (format_orders, format_outcome, format_table, plot_work_precision,
-                     write_table_csv)
+from .report import (format_orders, format_outcome, format_table, plot_estimates,
+                     plot_work_precision, write_table_csv)
 from .sweep import (FLOOR_FACTOR, UNSTABLE_ERROR, Outcome, Setting, cheapest, fewest_steps,
                     is_variable_step, load_or_solve_reference, orders, read_reference_file,
                     reference_grid, resume_key, run_one, run_settings, settings_for)
@@ -51,6 +51,7 @@ class AccuracyOptions:
     jobs: int | None = 1                       # local worker processes (None: every core)
     scheduler: str | None = None               # a Dask scheduler's address instead
     executor: object | None = None             # or any crankfmu.studies.executor.Executor
+    estimate: bool = True                      # the error estimate of each run (its companions)
 
 
 @dataclass
@@ -85,17 +86,26 @@ def run_accuracy(scene, options: AccuracyOptions) -> AccuracyResult:
         settings = [s for s in settings if not _excluded_by_default(s)]
     out = Path(options.out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    ref, ref_csv, cached, ref_key = _reference(scene, settings, metric, out, options)
+    from .estimates import add_estimates, extra_companions
+    companions = extra_companions(settings) if options.estimate else []
+    ref, ref_csv, cached, ref_key = _reference(scene, settings + companions, metric, out,
+                                               options)
     from ..executor import make_executor
     executor = options.executor or make_executor(options.jobs, options.scheduler)
     try:
-        outcomes = run_settings(scene, settings, metric, ref, options.fmu_dir, out / "runs",
+        outcomes = run_settings(scene, settings + companions, metric, ref, options.fmu_dir,
+                                out / "runs",
                                 executor, options.progress, f"{scene.name} accuracy sweep",
-                                options.report,
+                                _rows_only(options.report, set(companions)),
                                 resume_key(ref_key, metric) if options.resume else None)
     finally:
         if options.executor is None:
             executor.close()
+    outcomes = outcomes[:len(settings)]  # the companions only serve the estimates
+    if options.estimate:
+        add_estimates(outcomes, metric, out / "runs")
+        plot_estimates(out / "estimate_vs_error.png", outcomes, f"{scene.name}: estimated "
+                       f"against true error, t = {scene.start_time:g} to {scene.stop_time:g} s")
     csv, png = out / "accuracy.csv", out / "work_precision.png"
     write_table_csv(csv, outcomes, metric.describe())
     plot_work_precision(png, outcomes, metric.describe(), options.target,
@@ -120,6 +130,13 @@ def _reference(scene, settings, metric: Metric, out: Path, options: AccuracyOpti
                                                options.reference_rtol, options.progress)
     key = json.loads(csv.with_suffix(".json").read_text()).get("cache_key", "")
     return ref, csv, cached, key
+
+
+def _rows_only(report, companions: set):
+    """`report` called for the table's runs only (the companions are not rows)."""
+    if report is None or not companions:
+        return report
+    return lambda outcome, kept: None if outcome.setting in companions else report(outcome, kept)
 
 
 def _excluded_by_default(setting: Setting) -> bool:

@@ -8,15 +8,16 @@ from pathlib import Path
 from .sweep import Outcome
 
 COLUMNS = ("algorithm", "extrapolation", "step_s", "fmu_tolerance", "tolerance", "error",
-           "wall_s", "doStep_calls", "rollbacks", "communication_steps", "status")
+           "estimated_error", "wall_s", "doStep_calls", "rollbacks", "communication_steps", "status")
 
 
 def _row(o: Outcome) -> list:
     s = o.setting
     # no number for these: the figure or the reason is in the status
     error = "unstable" if o.unstable else "events differ" if o.events_differ else o.error
+    estimate = o.extra.get("estimated_error")  # cosim.estimate: empty when there is none
     return [s.algorithm, s.extrapolation, s.step, s.fmu_tolerance, s.tolerance, error,
-            o.wall_seconds, o.do_steps, o.rollbacks, o.communication_steps, o.status]
+            "" if estimate is None else estimate, o.wall_seconds, o.do_steps, o.rollbacks, o.communication_steps, o.status]
 
 
 def write_table_csv(path: Path, outcomes: list[Outcome], metric: str) -> None:
@@ -28,7 +29,7 @@ def write_table_csv(path: Path, outcomes: list[Outcome], metric: str) -> None:
 
 
 TABLE_HEAD = (f"{'algorithm':<13} {'ex':>2} {'step [s]':>9} {'fmu tol':>7} {'tol':>7} "
-              f"{'error [1]':>10} {'wall [s]':>8} {'doSteps':>8} {'rollb.':>6}  status")
+              f"{'error [1]':>10} {'estimate':>9} {'wall [s]':>8} {'doSteps':>8} {'rollb.':>6}  status")
 
 
 def format_outcome(o: Outcome) -> str:
@@ -37,8 +38,10 @@ def format_outcome(o: Outcome) -> str:
     status = o.status if len(o.status) < 60 else o.status[:57] + "..."
     error = f"{'unstable':>10}" if o.unstable else f"{'events ≠':>10}" if o.events_differ \
         else f"{o.error:>10.3e}"
+    est = o.extra.get("estimated_error")
+    est = f"{est:>9.2e}" if est is not None else f"{'-':>9}"
     return (f"{s.algorithm:<13} {s.extrapolation:>2} {s.step:>9.3g} "
-            f"{s.fmu_tolerance:>7.0e} {s.tolerance:>7.0e} {error} "
+            f"{s.fmu_tolerance:>7.0e} {s.tolerance:>7.0e} {error} {est} "
             f"{o.wall_seconds:>8.3f} {o.do_steps:>8d} {o.rollbacks:>6d}  {status}")
 
 
@@ -108,5 +111,39 @@ def plot_work_precision(path: Path, outcomes: list[Outcome], metric_text: str,
     axes[0].set_ylabel("error [1]")
     axes[1].legend(fontsize=7)
     fig.suptitle(f"{title}\nerror = {metric_text}", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def plot_estimates(path: Path, outcomes: list[Outcome], title: str) -> None:
+    """Estimated against true error, log-log, one marker per master and extrapolation, with the
+    diagonal and the band of a factor 3 either side."""
+    from ...cosim.results import PALETTE, new_figure
+
+    points = [(o, o.extra.get("estimated_error")) for o in outcomes]
+    points = [(o, e) for o, e in points if o.ok and o.error > 0 and e is not None and e > 0]
+    fig = new_figure(figsize=(6.5, 6))
+    ax = fig.subplots()
+    masters = sorted({o.setting.algorithm for o, _ in points})
+    colours = {m: PALETTE[i % len(PALETTE)] for i, m in enumerate(masters)}
+    markers = {0: "o", 1: "s", 2: "^"}
+    seen = set()
+    for o, e in points:
+        key = (o.setting.algorithm, o.setting.extrapolation)
+        ax.loglog(o.error, e, ls="", marker=markers.get(key[1], "D"), color=colours[key[0]],
+                  label=None if key in seen else f"{key[0]}, extrapolation {key[1]}")
+        seen.add(key)
+    if points:
+        values = [v for o, e in points for v in (o.error, e)]
+        lo, hi = min(values) / 3, max(values) * 3
+        ax.loglog([lo, hi], [lo, hi], "k-", lw=0.8, label="estimate = error")
+        for f in (3.0, 1 / 3.0):
+            ax.loglog([lo, hi], [lo * f, hi * f], "k:", lw=0.8)
+    inside = sum(1 for o, e in points if 1 / 3 <= e / o.error <= 3)
+    ax.set_xlabel("true error against the monolithic reference [1]")
+    ax.set_ylabel("estimated error (Richardson, companion runs) [1]")
+    ax.set_title(f"{title}\n{inside} of {len(points)} within a factor 3 (dotted)", fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=110)

@@ -29,7 +29,7 @@ import numpy as np
 
 from ...cosim.results import versions
 from ...reference import record_times, solve_reference, write_reference
-from .metrics import Metric, MetricError, ReferenceSamples, observed_order
+from ...cosim.metrics import Metric, MetricError, ReferenceSamples, observed_order
 
 FLOOR_FACTOR = 10.0  # errors below 10 x the FMUs' tolerance are not coupling errors
 UNSTABLE_ERROR = 1.0  # relative error above which a run has lost the solution (unstable)
@@ -167,7 +167,7 @@ def read_reference_file(csv: Path, needed: list[str], start: float,
     """A reference from elsewhere (another tool, a finer run) in the run's CSV layout: first
     column time [s], then one column per variable named "component.variable". Checked: it
     reads as numbers, time increases, it covers [start, stop] and has the `needed` columns."""
-    from .metrics import MetricError
+    from ...cosim.metrics import MetricError
     csv = Path(csv)
     if not csv.is_file():
         raise MetricError(f"--reference {csv}: no such file")

@@ -21,7 +21,7 @@ elsewhere) can be compared, and an error estimate can evaluate the same figure.
 """
 from __future__ import annotations
 
-from ...errors import CrankfmuError
+from ..errors import CrankfmuError
 
 import math
 from dataclasses import dataclass

@@ -10,7 +10,7 @@ so sampling effects are the same on both sides and only the coupling error remai
             component recorded): the larger of the relative errors of the mean crank speed
             2 pi n / T_n and of the non-uniformity delta = (w_max - w_min) / w_mean.
     events  the largest error over the scene's [analysis].events entries (event times, event
-            quantities, per-event figures; accuracy/events.py), each taken on the run's and the
+            quantities, per-event figures; cosim/events.py), each taken on the run's and the
             reference's own grids. The default metric of a scene whose [analysis] says
             metric = "events".
 
@@ -19,7 +19,7 @@ so sampling effects are the same on both sides and only the coupling error remai
 """
 from __future__ import annotations
 
-from ...errors import CrankfmuError
+from ..errors import CrankfmuError
 
 import math
 from dataclasses import dataclass

@@ -1,0 +1,237 @@
+"""An estimate of a run's global error without a reference: Richardson extrapolation from
+companion runs of the same master at another step (or tolerance).
+
+The error is the scene's own accuracy metric (`cosim/metrics.py`: the trajectory metric or the
+event figures its [analysis] names), evaluated between the run and a companion run of the same
+master at another setting r x (step or tolerance). With a global error e(x) ~ C x^p, the
+difference between the run and its companion is d = |e(r x) - e(x)| ~ |r^p - 1| e(x), so
+
+    estimate = d / |r^p - 1|.
+
+`crankfmu run`: one finer companion, at h/2 (fixed step, p = p0 = extrapolation + 1: the
+estimate is d 2^p / (2^p - 1), between 1.07 d and 2 d whatever p is) or at a tenth of a
+variable-step master's tolerance (p = 1: about 1.1 d). The finer run is nearer the asymptotic
+range than the run, so d measures the run's own error; coarse companions (2h and 4h, the order
+observed from the three runs) were cheaper but off more often: scripts/error_estimate.py
+measured the variants over the accuracy sweeps (README, "How wrong is a run, without a
+reference"). The `--target` search (cosim/target.py) uses the coarse form on its own runs
+(`richardson` with two companions and `coarse_bounds`; `richardson_steps` for any step ratios).
+
+Cost: the companion takes twice the run's communication steps (fixed step) or the steps of a
+tenth of the tolerance (about 10^(1/(extrapolation + 1)) x); the FMUs' own integration does not
+grow with the step count, so the wall time grows less (README). When it is wrong: the
+companion counts other events than the run (no estimate, the reason says so) or stops (no
+estimate), the run sits at the FMUs' tolerance floor (the difference is solver noise), an input
+is sampled off the step grid (the error does not follow a power of the step).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .metrics import Metric, MetricError, ReferenceSamples
+
+STEP_RATIO = 2.0          # run step / companion step (and the --target search's rungs)
+RATIO_TOLERANCE = 10.0    # variable-step master: run tolerance / companion tolerance
+ORDER_MIN, ORDER_MAX = 0.5, 5.0  # default clamp of an observed order (coarse_bounds narrows it)
+
+
+@dataclass
+class Estimate:
+    """The estimated global error of one run in the scene's metric; `error` is nan when there
+    is none, and `reason` says why."""
+    error: float = math.nan
+    order: float = math.nan         # p used in d / |r^p - 1| [1]
+    order_source: str = ""          # "observed" (from the second companion) or "nominal"
+    ratio: float = STEP_RATIO
+    knob: str = "step"              # what the companions vary: "step" or "tolerance"
+    differences: list[float] = field(default_factory=list)  # d(run, c1), d(c1, c2) [1]
+    companion_seconds: float = 0.0  # wall time of the companion runs
+    reason: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return math.isfinite(self.error)
+
+    def to_json(self) -> dict:
+        def num(x):
+            return x if isinstance(x, (int, float)) and math.isfinite(x) else None
+        return {"estimated_error": num(self.error), "method": "richardson",
+                "order": num(self.order), "order_source": self.order_source,
+                "ratio": self.ratio, "knob": self.knob,
+                "differences": [num(d) for d in self.differences],
+                "companion_seconds": self.companion_seconds, "reason": self.reason}
+
+
+def nominal_order(extrapolation: int) -> float:
+    """The fixed-step masters' design order: extrapolation p gives global order p + 1."""
+    return float(extrapolation + 1)
+
+
+def order_rule(variable_step: bool, extrapolation: int) -> tuple[float, tuple | None]:
+    """(order, bounds of an observed order) of `crankfmu run`'s estimator: one companion, so
+    the order is the design order p0 = extrapolation + 1 (fixed step) or 1 (variable step)."""
+    return (1.0 if variable_step else nominal_order(extrapolation)), None
+
+
+def coarse_bounds(extrapolation: int) -> tuple[float, float]:
+    """Bounds of the order observed from companions at 2h and 4h (the --target search):
+    [p0, p0 + 1] (Gauss-Seidel and the iterative master gain an order on some scenes; outside
+    that range the observed ratio was noise: scripts/error_estimate.py)."""
+    p0 = nominal_order(extrapolation)
+    return p0, p0 + 1.0
+
+
+def difference(metric: Metric, a: tuple, b: tuple) -> tuple[float, str]:
+    """(the metric between runs `a` and `b`, reason if none). Runs are (times [s], {column:
+    values}); the one with more record points serves as the reference, looked up at the other's
+    record times (exact grid points when one grid is a subset of the other, as for steps h and
+    2h; else a cubic spline through the denser grid). Infinite with the reason when the runs
+    count different events."""
+    fine, coarse = (a, b) if len(a[0]) >= len(b[0]) else (b, a)
+    t_c, cols_c = coarse
+    t_f, cols_f = fine
+    ref = ReferenceSamples(np.asarray(t_f, dtype=float), cols_f)
+    try:
+        if metric.name == "events":
+            details = metric.event_details(np.asarray(t_c, dtype=float), cols_c, ref)
+            reasons = [d.reason for d in details if d.reason]
+            if reasons:
+                return math.inf, "event count differs between the run and its companion: " + \
+                    "; ".join(reasons)
+        return float(metric.error(np.asarray(t_c, dtype=float), cols_c, ref)), ""
+    except MetricError as err:
+        return math.nan, str(err)
+
+
+def richardson(metric: Metric, runs: list[tuple], ratio: float, knob: str,
+               nominal: float, bounds: tuple[float, float] | None = None) -> Estimate:
+    """The estimate from `runs` = [run, companion 1, (companion 2)], each (times, columns), the
+    companions at ratio and ratio^2 x the run's step (knob "step") or tolerance ("tolerance").
+    With two companions the order is observed, clamped to `bounds` (default
+    [ORDER_MIN, ORDER_MAX]), else `nominal`."""
+    lo, hi = bounds or (ORDER_MIN, ORDER_MAX)
+    est = Estimate(ratio=ratio, knob=knob)
+    d1, why = difference(metric, runs[0], runs[1])
+    est.differences.append(d1)
+    if not math.isfinite(d1):
+        est.reason = why or "the companion run differs without bound"
+        return est
+    est.order, est.order_source = nominal, "nominal"
+    if len(runs) > 2:
+        d2, why2 = difference(metric, runs[1], runs[2])
+        est.differences.append(d2)
+        if math.isfinite(d2) and d1 > 0 and d2 > 0:
+            observed = math.log(d2 / d1) / math.log(ratio)
+            est.order = min(hi, max(lo, observed))
+            est.order_source = "observed"
+            if abs(observed - est.order) > 0.25:  # not the noise of an order at its bound
+                est.reason = f"observed order {observed:.2f} clamped to {est.order:g}"
+        elif why2:
+            est.reason = f"order not observed ({why2}); nominal order used"
+    est.error = d1 / abs(ratio ** est.order - 1.0)
+    return est
+
+
+def companion_knobs(algorithm_variable_step: bool, step: float, tolerance: float
+                    ) -> tuple[str, float, list[float]]:
+    """(knob, ratio, companion values) of `crankfmu run`'s estimate for a run at `step` and
+    `tolerance`: a finer companion, at half the step or a tenth of the tolerance."""
+    if algorithm_variable_step:
+        return "tolerance", 1.0 / RATIO_TOLERANCE, [tolerance / RATIO_TOLERANCE]
+    return "step", 1.0 / STEP_RATIO, [step / STEP_RATIO]
+
+
+# -- helpers of a run's estimate (the companions are run by cosim.runner.estimate_run) ---------
+def scene_metric(scene) -> Metric:
+    """The metric the scene is judged by ([analysis]; cosim/metrics.py), on its recorded
+    variables plus the event figures' variables."""
+    from .metrics import make_metric, scene_event_specs, scene_metric_name
+    specs = scene_event_specs(scene)
+    record = list(dict.fromkeys(scene.record + [v for s in specs for v in s.needs]))
+    return make_metric(scene_metric_name(scene), record, None, 1, specs)
+
+
+def with_metric_record(scene):
+    """`scene` (a copy if anything is added) recording what its metric needs."""
+    import copy
+    from .metrics import scene_event_specs
+    needs = [v for s in scene_event_specs(scene) for v in s.needs if v not in scene.record]
+    if not needs:
+        return scene
+    scene = copy.deepcopy(scene)
+    scene.record = scene.record + needs
+    return scene
+
+
+def recorder_series(recorder) -> tuple:
+    return recorder.rows[:, 0], {n: recorder.column(n) for n in recorder.names}
+
+
+def companion_scene(scene, knob: str, value: float):
+    import copy
+    trial = copy.deepcopy(scene)
+    setattr(trial.master, knob, value)
+    return trial
+
+
+def format_estimate(est: Estimate) -> str:
+    """One line for the terminal."""
+    if not est.ok:
+        return f"estimated error: none ({est.reason})"
+    if est.knob == "tolerance":
+        where = f"a companion at {est.ratio:g} x the tolerance"
+    elif est.ratio < 1:
+        where = f"a companion at {est.ratio:g} x the step"
+    else:
+        where = f"companions at {est.ratio:g} and {est.ratio ** 2:g} x the step"
+    return (f"estimated error {est.error:.2e} (Richardson from {where}, order {est.order:.2f} "
+            f"{est.order_source}; the companion runs took {est.companion_seconds:.2f} s)"
+            + (f"; {est.reason}" if est.reason else ""))
+
+
+def richardson_steps(metric: Metric, runs: list[tuple], nominal: float,
+                     bounds: tuple[float, float] | None = None) -> Estimate:
+    """The estimate of the last of `runs` = [(step, (times, columns)), ...], 2 or 3 runs of one
+    master with decreasing steps in any ratios (the `--target` search jumps). With e(h) = C h^p:
+    d(h_i, h_j) = C |h_i^p - h_j^p|; two runs use p = `nominal`; three observe p from
+    d12 / d23 = (h1^p - h2^p) / (h2^p - h3^p) (clamped to `bounds`). Then
+    e(h_last) = d_last h_last^p / (h_prev^p - h_last^p) (for h_prev = 2 h_last: d / (2^p - 1))."""
+    steps = [h for h, _ in runs]
+    est = Estimate(ratio=steps[-2] / steps[-1], knob="step")
+    d_last, why = difference(metric, runs[-1][1], runs[-2][1])
+    est.differences.append(d_last)
+    if not math.isfinite(d_last):
+        est.reason = why or "the companion run differs without bound"
+        return est
+    est.order, est.order_source = nominal, "nominal"
+    if len(runs) >= 3:
+        d_first, why_first = difference(metric, runs[-2][1], runs[-3][1])
+        est.differences.insert(0, d_first)
+        if math.isfinite(d_first) and d_first > 0 and d_last > 0:
+            lo, hi = bounds or (ORDER_MIN, ORDER_MAX)
+            est.order = _observed_order(steps[-3:], d_first / d_last, lo, hi)
+            est.order_source = "observed"
+        elif why_first:
+            est.reason = f"order not observed ({why_first}); nominal order used"
+    h_prev, h = steps[-2] ** est.order, steps[-1] ** est.order
+    est.error = d_last * h / (h_prev - h)
+    return est
+
+
+def _observed_order(steps, ratio: float, lo: float, hi: float) -> float:
+    """p in [lo, hi] with (h1^p - h2^p) / (h2^p - h3^p) = ratio (increasing in p), bisected."""
+    h1, h2, h3 = steps
+
+    def f(p):
+        return (h1 ** p - h2 ** p) / (h2 ** p - h3 ** p)
+    if ratio <= f(lo):
+        return lo
+    if ratio >= f(hi):
+        return hi
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if f(mid) < ratio else (lo, mid)
+    return 0.5 * (lo + hi)
