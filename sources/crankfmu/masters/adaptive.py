@@ -10,12 +10,21 @@ the coupling makes over the step, O(h^(p+1)). A step with err > 1 is rejected: e
 back to t and the step retried with h * max(0.2, 0.9 err^(-1/(p+1))); an accepted step proposes
 the next one as h * min(5, 0.9 err^(-1/(p+1))), always within [min_step, max_step]. A step at
 min_step is accepted whatever its error (counted in `accepted_above_tolerance`).
+
+External inputs are written at a step's start and held over it, so a step across the edge of a
+step table (a clutch command) would move the edge to the step's end, by up to max_step, and the
+error estimate cannot see it (the input is no connected output). Steps therefore end exactly at
+the tables' edges (masters.inputs.step_edges); a step that would stop less than min_step short
+of an edge is stretched to it, as the runner does at stop_time.
 """
 from __future__ import annotations
 
+import bisect
+import math
 import warnings
 
 from .base import Master
+from .inputs import step_edges
 from .options import EXTRAPOLATION, TOLERANCE, Option, OptionError
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 5.0
@@ -40,6 +49,7 @@ class Adaptive(Master):
         self.counts = {"accepted_steps": 0, "rejected_steps": 0, "accepted_above_tolerance": 0,
                        "smallest_step": None, "largest_step": None}
         self.extra_statistics = self.counts
+        self.edges = step_edges(system)  # s: steps end here (the module's docstring)
 
     @classmethod
     def check_options(cls, values: dict) -> None:
@@ -50,7 +60,21 @@ class Adaptive(Master):
     def _clip(self, h: float) -> float:
         return min(max(h, self.min_step), self.max_step)
 
+    def _to_edge(self, t: float, h: float) -> float:
+        """h, shortened (or stretched by less than min_step) so that the step ends at the first
+        input edge after t if it would cross it: t + h >= edge in floats, so the next step's
+        start reads the new value (InputSignal.value_at holds it from the edge on)."""
+        i = bisect.bisect_right(self.edges, t)
+        if i == len(self.edges) or t + h < self.edges[i] - self.min_step:
+            return h
+        edge = self.edges[i]
+        h = edge - t
+        while t + h < edge:  # rounding: at most an ulp or two short
+            h = math.nextafter(h, math.inf)
+        return h
+
     def _step(self, t: float, h: float) -> float:
+        h = self._to_edge(t, h)
         order = min(self.extrapolation, len(self.history.times) - 1)
         states = self.save_states()
         coefficients = self.source_coefficients(t, order)

@@ -100,3 +100,17 @@ def _derivative_writer(system, comp: str):
             padded[0] = rows[1] if len(rows) == 2 else 0.0
             write(flat)
     return write_rows
+
+
+def step_edges(system) -> list[float]:
+    """The times [s] where an external input given as a step table jumps (value_at changes
+    there: the new value holds from the edge on), sorted, without repeats. The masters write
+    external inputs at a step's start and hold them over the step, so a step that crosses an
+    edge shifts it to the step's end; a variable-step master ends its steps at these times."""
+    edges = set()
+    for signals in system.external.values():
+        for _, s in signals:
+            if s.interpolation == "step":
+                edges.update(t for t, before, after in zip(s.times[1:], s.values, s.values[1:])
+                             if after != before)
+    return sorted(edges)
