@@ -163,3 +163,19 @@ def test_compare_accuracy_and_sweep_write_only_into_out(tmp_path, monkeypatch, f
                       extrapolations=[0], steps=[2e-3], fmu_dir=fmu_dir, reference_rtol=1e-8)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["acc"]
     assert (tmp_path / "acc" / "accuracy.csv").is_file()
+
+
+def test_inputs_take_a_table_with_its_interpolation_as_a_scene_file_does(servo_scene):
+    """inputs={ref: {"table": ..., "interpolation": "step"}} is the scene file's form; it raised
+    a ValueError traceback (the dict was read as rows); bad forms name the key."""
+    from crankfmu.system.scene import SceneError, set_input
+    set_input(servo_scene, "motor.u", {"table": [[0.0, 0.0], [0.1, 220.0]],
+                                       "interpolation": "step"})
+    signal = servo_scene.inputs["motor.u"]
+    assert (signal.times, signal.values, signal.interpolation) == ([0.0, 0.1], [0.0, 220.0],
+                                                                     "step")
+    set_input(servo_scene, "motor.u", [[0.0, 1.0], [1.0, 2.0]])
+    assert servo_scene.inputs["motor.u"].interpolation == "linear"
+    for bad in ({"table": [[0.0, 1.0]], "interpolation": "cubic"}, "220", [[0.0, "x"]]):
+        with pytest.raises(SceneError, match="motor.u"):
+            set_input(servo_scene, "motor.u", bad)

@@ -493,8 +493,9 @@ def set_value(scene: Scene, ref: str, value, key: str | None = None) -> None:
 
 
 def set_input(scene: Scene, ref: str, value, key: str | None = None) -> None:
-    """Drive the unconnected input `ref` with a constant, a table [[t, v], ...] or an
-    InputSignal (the Python API's inputs=; --set comp.input=value)."""
+    """Drive the unconnected input `ref` with a constant, a table [[t, v], ...], a scene file's
+    {"table": ..., "interpolation": "step"} or an InputSignal (the Python API's inputs=; --set
+    comp.input=value)."""
     key = key or f"[inputs].\"{ref}\""
     _variable_ref(scene.path, key, ref, scene.components)
     if any(c.target == ref for c in scene.connections):
@@ -506,8 +507,14 @@ def set_input(scene: Scene, ref: str, value, key: str | None = None) -> None:
         raise SceneError(scene.path, key, f"an input takes a number, got {value!r}")
     elif isinstance(value, (int, float)):
         signal = _parse_input(scene.path, ref, float(value))
+    elif isinstance(value, dict):  # as in a scene file: {"table": [[t, v], ...], "interpolation"}
+        signal = _parse_input(scene.path, ref, value)
+    elif isinstance(value, (list, tuple)):
+        signal = _parse_input(scene.path, ref, {"table": [list(r) if isinstance(r, (list, tuple))
+                                                          else r for r in value]})
     else:
-        signal = _parse_input(scene.path, ref, {"table": [list(map(float, r)) for r in value]})
+        raise SceneError(scene.path, key, "an input takes a number, a table [[t, v], ...] or "
+                                          f"{{'table': ..., 'interpolation': ...}}, got {value!r}")
     scene.inputs[ref] = signal
 
 
