@@ -215,43 +215,14 @@ def reference_run(scene: str, linear: bool, t_end: float, rtol=1e-12, atol=1e-12
 
 # -- 2. closed form with the linear motor law ---------------------------------------------------
 def closed_form(scene: str, t_end: float, d=DRIVE, m=MOTOR) -> dict:
-    """Piecewise matrix-exponential solution, z = (w_b, w_h, e_b, e_h, 1)."""
-    p = d["r_b"] / d["r_a"]
-    Ja, Jb, Jh = d["J_a"], d["J_b"], d["J_h"]
-    m11, m12, m22 = Ja * p * p + Jb, -Ja * p * (1 + p), Ja * (1 + p) ** 2 + Jh
+    """Piecewise matrix-exponential solution, z = (w_b, w_h, e_b, e_h, 1): the phases' linear
+    systems from the product (crankfmu.studies.papers.planetary_phases, written apart from the
+    model and its reference), integrated here with scipy's expm and its own event search."""
+    from crankfmu.studies.papers import planetary_phases
+
     c0 = motor_law(True, m)(0.0)
     c1 = c0 - motor_law(True, m)(1.0)
-    if scene == "engage":  # M_tb = Mp_b - Mp_b e_b, e_b = exp(-alpha_b t); M_th = Mp_h e_h
-        lam = (d["alpha_b"], d["beta_h"])
-        Mt = {"b": np.array([0, 0, -d["Mp_b"], 0, d["Mp_b"]]),
-              "h": np.array([0, 0, 0, d["Mp_h"], 0])}
-    else:  # M_tb = Mp_b e_b, e_b = exp(-beta_b t); M_th = Mp_h - Mp_h e_h
-        lam = (d["beta_b"], d["alpha_h"])
-        Mt = {"b": np.array([0, 0, d["Mp_b"], 0, 0]),
-              "h": np.array([0, 0, 0, -d["Mp_h"], d["Mp_h"]])}
-    unit = np.array([0, 0, 0, 0, 1.0])
-    C = {"b": Mt["b"] + d["M_cb"] * unit, "h": Mt["h"] + d["M_ch"] * unit}
-    M_A = np.array([c1 * p, -c1 * (1 + p), 0, 0, c0 - d["M_ca"]])  # M_m - M_ca, linear in z
-    Q_b, Q_h = -p * M_A, (1 + p) * M_A
-
-    def pieces(mode):
-        """(A, F_b row, F_h row): dz/dt = A z, friction torques as functionals of z."""
-        A = np.zeros((5, 5))
-        A[2, 2], A[3, 3] = -lam[0], -lam[1]
-        if mode["b"] and mode["h"]:
-            F_b, F_h = -mode["b"] * C["b"], -mode["h"] * C["h"]
-            acc = np.linalg.solve(np.array([[m11, m12], [m12, m22]]),
-                                  np.vstack([Q_b + F_b, Q_h + F_h]))
-            A[0], A[1] = acc[0], acc[1]
-        elif mode["h"]:
-            F_h = -mode["h"] * C["h"]
-            A[1] = (Q_h + F_h) / m22
-            F_b = m12 * A[1] - Q_b
-        else:
-            F_b = -mode["b"] * C["b"]
-            A[0] = (Q_b + F_b) / m11
-            F_h = m12 * A[0] - Q_h
-        return A, F_b, F_h
+    pieces, C, _, p, mode1, held, mover = planetary_phases(d, c0, c1, scene)
 
     def z_at(A, z, s):
         return expm(A * s) @ z
@@ -278,10 +249,6 @@ def closed_form(scene: str, t_end: float, d=DRIVE, m=MOTOR) -> dict:
     torque = motor_law(True, m)
     w_a0, w_h0 = initial_speeds(scene, torque, d, m)
     z0 = np.array([(-w_a0 + (1 + p) * w_h0) / p, w_h0, 1.0, 1.0, 1.0])
-    if scene == "engage":
-        mode1, held, mover = {"b": -1, "h": 0}, "h", "b"
-    else:
-        mode1, held, mover = {"b": 0, "h": 1}, "b", "h"
     # phase 1: `held` is locked until its friction torque reaches its capacity
     A1, F_b1, F_h1 = pieces(mode1)
     F1 = F_h1 if held == "h" else F_b1

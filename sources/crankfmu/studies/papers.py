@@ -463,19 +463,14 @@ def linear_motor_law(motor) -> tuple[float, float]:
     return M(0.0), M(0.0) - M(1.0)
 
 
-def planetary_closed_form(d: dict, c0: float, c1: float, scene: str, w_a0: float, w_h0: float,
-                          t_end: float, n: int = 400, lock_only: bool = False) -> dict:
-    """Engagement ('engage': ring brake b engages by M_p (1 - e^(-alpha_b t)), carrier brake h
-    releases by M_p e^(-beta_h t)) or stopping ('stop': the reverse) from the speeds w_a0, w_h0
-    (the held member at rest), with the linear motor law. Each phase (fixed lock/slide pattern)
-    is linear time-invariant in z = (w_b, w_h, e_b, e_h, 1), e_k the brakes' exponentials:
-    z(t) = expm(A t) z(t_i); break-free and lock are roots of linear functionals of z (brentq on
-    the exact expm). The same construction as tests/support/planetary_reference.py's `closed_form`,
-    extended by the speeds on a grid and the brake energies (trapezoidal rule on the grid,
-    n intervals per phase: relative error ~1e-6). Units SI; d holds the drive's parameters."""
-    from scipy.optimize import brentq
-
-    expm = _expm
+def planetary_phases(d: dict, c0: float, c1: float, scene: str):
+    """The linear phases of an engagement ('engage': ring brake b engages by
+    M_p (1 - e^(-alpha_b t)), carrier brake h releases by M_p e^(-beta_h t)) or a stop ('stop':
+    the reverse) with the linear motor law M = c0 - c1 w_a, in z = (w_b, w_h, e_b, e_h, 1), e_k
+    the brakes' exponentials. Returns (pieces, C, Mt, p, first mode, held member, mover):
+    pieces(mode) -> (A, F_b, F_h), dz/dt = A z in that lock/slide pattern (mode[k] = 0 locked,
+    +-1 sliding), the friction torques as linear functionals of z; C[k] @ z is member k's
+    capacity, Mt[k] @ z its brake torque. Units SI; d holds the drive's parameters."""
     p = d["r_b"] / d["r_a"]
     Ja, Jb, Jh = d["J_a"], d["J_b"], d["J_h"]
     m11, m12, m22 = Ja * p * p + Jb, -Ja * p * (1 + p), Ja * (1 + p) ** 2 + Jh
@@ -511,6 +506,20 @@ def planetary_closed_form(d: dict, c0: float, c1: float, scene: str, w_a0: float
             A[0] = (Q_b + F_b) / m11
             F_h = m12 * A[0] - Q_h
         return A, F_b, F_h
+
+    return pieces, C, Mt, p, mode1, held, mover
+
+
+def planetary_closed_form(d: dict, c0: float, c1: float, scene: str, w_a0: float, w_h0: float,
+                          t_end: float, n: int = 400, lock_only: bool = False) -> dict:
+    """Engagement or stop (planetary_phases) from the speeds w_a0, w_h0 (the held member at
+    rest): each phase is linear time-invariant, z(t) = expm(A t) z(t_i); break-free and lock are
+    roots of linear functionals of z (brentq on the exact expm). The speeds on a grid and the
+    brake energies (trapezoidal rule on the grid, n intervals per phase: relative error ~1e-6)."""
+    from scipy.optimize import brentq
+
+    expm = _expm
+    pieces, C, Mt, p, mode1, held, mover = planetary_phases(d, c0, c1, scene)
 
     def grid(A, z, span):
         step = expm(A * (span / n))
