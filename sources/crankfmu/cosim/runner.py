@@ -16,6 +16,7 @@ from ..errors import CrankfmuError, InterruptedRun
 from ..system.scene import Scene, SceneError, check_run_size
 from ..fmu.instance import FmuInstance, LogCollector
 from ..masters import MASTERS, DivergenceError, OptionError, make_master
+from ..masters.inputs import split_at_edges, step_edges
 from .results import (Recorder, column_units, normalize_unit, plot, versions, write_csv,
                       write_sidecar)
 from ..system.wiring import (System, check_components, check_links, check_loops, check_physics,
@@ -338,13 +339,21 @@ def _reference_beside(out: Path, recorder: Recorder):
 
 def _fixed_steps(master, scene: Scene, progress):
     """Steps of [master].step on the grid t0 + k h (the last one shortened to end at
-    stop_time); yields (step, t, t_new, record?) with rows every [record].interval."""
+    stop_time); yields (step, t, t_new, record?) with rows every [record].interval. A grid step
+    across an edge of a step-table input is taken in pieces that end at the edge
+    (masters.inputs.split_at_edges): the input is written at a step's start and held, so the
+    edge would otherwise act up to a step late (on the conventional press at 4 ms that cost
+    more error than the coupling did)."""
     h, t0, stop = scene.master.step, scene.start_time, scene.stop_time
     n_steps = max(1, math.ceil((stop - t0) / h - 1e-9))
     every = max(1, round((scene.record_interval or h) / h))
+    edges = step_edges(master.system)
     for step in _progress(range(1, n_steps + 1), progress, scene.name):
         t = t0 + (step - 1) * h
-        master.step(t, min(h, stop - t))
+        start = t
+        for piece in split_at_edges(t, min(h, stop - t), edges):
+            master.step(start, piece)
+            start += piece
         yield step, t, min(t0 + step * h, stop), step % every == 0 or step == n_steps
 
 

@@ -24,7 +24,7 @@ import math
 import warnings
 
 from .base import Master
-from .inputs import step_edges
+from .inputs import edge_reading_time, step_edges
 from .options import EXTRAPOLATION, TOLERANCE, Option, OptionError
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 5.0
@@ -64,7 +64,7 @@ class Adaptive(Master):
         """h, shortened (or stretched by less than min_step) so that the step ends at the first
         input edge after t if it would cross it: t + h >= edge in floats, so the next step's
         start reads the new value (InputSignal.value_at holds it from the edge on)."""
-        i = bisect.bisect_right(self.edges, t)
+        i = bisect.bisect_right(self.edges, edge_reading_time(t))  # as value_at reads
         if i == len(self.edges) or t + h < self.edges[i] - self.min_step:
             return h
         edge = self.edges[i]

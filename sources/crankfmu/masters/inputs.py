@@ -8,6 +8,8 @@ order of accuracy drops to at most 2 there).
 """
 from __future__ import annotations
 
+import bisect
+import math
 import warnings
 
 import numpy as np
@@ -114,3 +116,39 @@ def step_edges(system) -> list[float]:
                 edges.update(t for t, before, after in zip(s.times[1:], s.values, s.values[1:])
                              if after != before)
     return sorted(edges)
+
+
+# A step table's edge within this many ulps after a time counts as reached at that time: a
+# fixed-step master's grid point t0 + k h can land an ulp or two before an edge meant to be on
+# it, and the new value must then hold from that point, not from a step later.
+EDGE_ULPS = 64
+
+
+def edge_reading_time(t: float) -> float:
+    """The time at which a step table is read for time t (InputSignal.value_at): t plus
+    EDGE_ULPS ulps, so that an edge a rounding error after t counts as reached."""
+    return t + EDGE_ULPS * math.ulp(t)
+
+
+def split_at_edges(t: float, h: float, edges: list[float]) -> list[float]:
+    """The pieces [s] a fixed-step master takes for the grid step (t, t + h) so that each edge
+    strictly inside it ends a piece (external inputs are written at a step's start and held:
+    a step across an edge would apply it up to a step late). Edges within EDGE_ULPS ulps of
+    the step's ends are on them (edge_reading_time). A piece that ends at an edge reaches it in
+    floats (t + piece >= edge), so the next piece reads the new value. [h] when no edge is
+    inside, the same float h the grid gives."""
+    i = bisect.bisect_right(edges, edge_reading_time(t))
+    end = t + h
+    pieces, start = [], t
+    while i < len(edges) and edge_reading_time(edges[i]) < end:
+        edge = edges[i]
+        piece = edge - start
+        while start + piece < edge:  # rounding: at most an ulp or two short
+            piece = math.nextafter(piece, math.inf)
+        pieces.append(piece)
+        start += piece
+        i += 1
+    if not pieces:
+        return [h]
+    pieces.append(end - start)
+    return pieces

@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import MAX_NAME_LENGTH, MAX_STEPS, MAX_TIME, SceneError
+from ..masters.inputs import edge_reading_time
 
 TOP_LEVEL_KEYS = {"scene", "master", "components", "connections", "inputs", "record", "swap",
                   "analysis"}
@@ -74,8 +75,9 @@ class InputSignal:
     def value_at(self, t: float) -> float:
         if len(self.times) == 1:
             return self.values[0]
-        if self.interpolation == "step":
-            return self.values[max(0, bisect.bisect_right(self.times, t) - 1)]
+        if self.interpolation == "step":  # an edge a few ulps after t counts as reached
+            i = bisect.bisect_right(self.times, edge_reading_time(t))
+            return self.values[max(0, i - 1)]
         return float(np.interp(t, self.times, self.values))
 
 
