@@ -120,7 +120,7 @@ def prepare(scene, *, stop_time=None, step=None, algorithm=None, parameters=None
 
 def simulate(scene, *, stop_time=None, step=None, algorithm=None, parameters=None,
              inputs=None, out=None, progress=False, plot=False, fmu_dir=None, log=False,
-             estimate=True, target=None, **master_options) -> Result:
+             estimate=True, target=None, jobs=1, **master_options) -> Result:
     """Co-simulate the scene with its master (crankfmu.cosim.runner.run_scene) and return the
     recorded values. `out`: a CSV path to write (the JSON sidecar beside it, and with
     `plot=True` a PNG); nothing is written without it. `fmu_dir`: the built FMUs (default:
@@ -130,17 +130,19 @@ def simulate(scene, *, stop_time=None, step=None, algorithm=None, parameters=Non
     `estimate`: run the companions of the error estimate (Result.estimated_error; about 0.75 x
     the run's cost). `target` (or the scene's [master].target): the global error wanted;
     master, extrapolation and step are chosen from the estimate (crankfmu.cosim.target);
-    raises crankfmu.cosim.target.TargetNotMet saying why when no setting meets it."""
+    raises crankfmu.cosim.target.TargetNotMet saying why when no setting meets it. `jobs=2`:
+    the companion runs execute in a worker process beside the run (crankfmu.cosim.companions;
+    a spawned interpreter, so a script that calls this needs `if __name__ == "__main__":`)."""
     from .cosim.runner import RunOptions, run_scene
     scene = prepare(scene, stop_time=stop_time, step=step, algorithm=algorithm,
                     parameters=parameters, inputs=inputs, **master_options)
     if target is not None:
         set_value(scene, "master.target", target, "target")
     if scene.master.target is not None:
-        return _simulate_target(scene, out, plot, fmu_dir)
+        return _simulate_target(scene, out, plot, fmu_dir, jobs)
     result = run_scene(scene, RunOptions(out=Path(out) if out is not None else None,
                                          plot=plot, fmu_dir=fmu_dir, progress=progress,
-                                         verbose_log=log, estimate=estimate))
+                                         verbose_log=log, estimate=estimate, jobs=jobs))
     m = scene.master
     return _result(result.recorder, result.metadata,
                    {"csv": result.csv, "sidecar": result.sidecar, "png": result.png},
@@ -153,9 +155,9 @@ def set_value(scene, ref, value, key):
     _set(scene, ref, value, key)
 
 
-def _simulate_target(scene, out, plot, fmu_dir) -> Result:
+def _simulate_target(scene, out, plot, fmu_dir, jobs) -> Result:
     from .cosim.target import search, write_chosen
-    result, report = search(scene, scene.master.target, fmu_dir)
+    result, report = search(scene, scene.master.target, fmu_dir, jobs)
     result.metadata["error_estimate"] = report.estimate.to_json()
     result.metadata["target"] = report.to_json()
     if out is not None:

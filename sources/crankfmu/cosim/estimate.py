@@ -19,7 +19,8 @@ reference"). The `--target` search (cosim/target.py) uses the coarse form on its
 
 Cost: the companion takes twice the run's communication steps (fixed step) or the steps of a
 tenth of the tolerance (about 10^(1/(extrapolation + 1)) x); the FMUs' own integration does not
-grow with the step count, so the wall time grows less (README). When it is wrong: the
+grow with the step count, so the wall time grows less (README). With a spare core it runs in a
+worker beside the run (cosim/companions.py; `crankfmu run --jobs`). When it is wrong: the
 companion counts other events than the run (no estimate, the reason says so) or stops (no
 estimate), the run sits at the FMUs' tolerance floor (the difference is solver noise), an input
 is sampled off the step grid (the error does not follow a power of the step).

@@ -75,6 +75,10 @@ class RunOptions:
     # estimate the run's global error from companion runs (cosim/estimate.py): the sidecar's
     # "error_estimate"; off for the runs of studies, which compare against a reference
     estimate: bool = False
+    # processes for the run and its companions (cosim/companions.py): 1 runs the companions
+    # here after the run; 2 runs them in a worker beside it (the command line's default where
+    # the machine has a second core)
+    jobs: int = 1
 
 
 def load_fmus(scene: Scene, fmu_dir: Path, log: LogCollector) -> dict[str, FmuInstance]:
@@ -176,7 +180,28 @@ def run_scene(scene: Scene, options: RunOptions | None = None) -> RunResult:
         scene = with_metric_record(scene)
     out = Path(options.out) if options.out is not None else None
     log = LogCollector(echo=options.verbose_log)
-    fmus = load_fmus(scene, options.fmu_dir or default_fmu_dir(scene), log)
+    fmu_dir = options.fmu_dir or default_fmu_dir(scene)
+    companions = _companions(options)  # workers start while the FMUs load
+    try:
+        result = _prepare_and_run(scene, options, out, log, fmu_dir, companions)
+    except BaseException:
+        if companions is not None:  # the run stopped: its companions are of no use
+            companions.close(abandon=True)
+        raise
+    if companions is not None:
+        companions.close()
+    return result
+
+
+def _companions(options: RunOptions):
+    if not options.estimate:
+        return None
+    from .companions import Companions
+    return Companions(options.jobs)
+
+
+def _prepare_and_run(scene, options, out, log, fmu_dir, companions) -> RunResult:
+    fmus = load_fmus(scene, fmu_dir, log)
     try:
         check_components(scene, fmus)
         links = check_links(scene, fmus)
@@ -194,18 +219,25 @@ def run_scene(scene: Scene, options: RunOptions | None = None) -> RunResult:
     except BaseException:
         close_fmus(fmus)
         raise
-    with _Interrupt() as interrupt:
-        result = _run(scene, options, out, log, fmus, system, master, recorder, readers,
-                      interrupt)
-    if options.estimate:
-        _add_estimate(scene, options, result)
+    # the FMUs are built now: the companions can load them beside this run
+    pending = submit_companions(scene, fmu_dir, companions) if companions is not None else None
+    try:
+        with _Interrupt() as interrupt:
+            result = _run(scene, options, out, log, fmus, system, master, recorder, readers,
+                          interrupt)
+    except BaseException:
+        for _, companion in pending or ():
+            companion.cancel()
+        raise
+    if pending is not None:
+        _add_estimate(scene, fmu_dir, result, pending)
     return result
 
 
-def _add_estimate(scene: Scene, options: RunOptions, result: RunResult) -> None:
-    """Run the companions, put the estimate in the result and its sidecar."""
+def _add_estimate(scene: Scene, fmu_dir, result: RunResult, pending: list) -> None:
+    """Collect the companions, put the estimate in the result and its sidecar."""
     from .estimate import recorder_series
-    result.estimate = estimate_run(scene, recorder_series(result.recorder), options.fmu_dir)
+    result.estimate = estimate_run(scene, recorder_series(result.recorder), fmu_dir, pending)
     result.metadata["error_estimate"] = result.estimate.to_json()
     if result.sidecar is not None:
         write_sidecar(result.sidecar, result.metadata)
@@ -278,32 +310,55 @@ def _run(scene, options, out, log, fmus, system, master, recorder, readers, inte
 FLOOR_FACTOR = 10.0  # an estimate below this x fmu_tolerance is flagged (the studies' floor)
 
 
-def estimate_run(scene, run_series: tuple, fmu_dir=None):
-    """Run the companions of `scene` (its master at 2h and 4h, or at a tenth of a
-    variable-step master's tolerance) and estimate the error of the run recorded in
-    `run_series` (times, columns)."""
-    from .estimate import (Estimate, companion_knobs, companion_scene, order_rule,
-                           recorder_series, richardson, scene_metric)
+def run_companion(scene, fmu_dir):
+    """One companion run, no files written: a CompanionRun (module level: a worker of
+    cosim.companions calls it)."""
+    from .companions import CompanionRun
+    from .estimate import recorder_series
+    t0 = time.perf_counter()
+    try:
+        result = run_scene(scene, RunOptions(out=None, fmu_dir=fmu_dir, progress=False))
+    except CrankfmuError as err:  # RunError (it stopped) or a refused setting (too many steps)
+        return CompanionRun(None, time.perf_counter() - t0, str(err))
+    return CompanionRun(recorder_series(result.recorder), time.perf_counter() - t0)
+
+
+def submit_companions(scene, fmu_dir, companions) -> list:
+    """Start the companion runs of `scene`'s estimate (its master at half the step, or at a
+    tenth of a variable-step master's tolerance): [(knob value, Pending)]."""
+    from .estimate import companion_knobs, companion_scene
+    m = scene.master
+    variable = bool(getattr(MASTERS.get(m.algorithm), "variable_step", False))
+    knob, _, values = companion_knobs(variable, m.step, m.tolerance)
+    return [(v, companions.submit(run_companion, companion_scene(scene, knob, v), fmu_dir))
+            for v in values]
+
+
+def estimate_run(scene, run_series: tuple, fmu_dir=None, pending: list | None = None):
+    """The estimated error of the run of `scene` recorded in `run_series` (times, columns),
+    from its companions (`pending` from submit_companions; run here, one after another,
+    without it)."""
+    from .companions import Companions
+    from .estimate import Estimate, companion_knobs, order_rule, richardson, scene_metric
     from .metrics import MetricError
     m = scene.master
     variable = bool(getattr(MASTERS.get(m.algorithm), "variable_step", False))
-    knob, ratio, values = companion_knobs(variable, m.step, m.tolerance)
+    knob, ratio, _ = companion_knobs(variable, m.step, m.tolerance)
     try:
         metric = scene_metric(scene)
     except MetricError as err:
         return Estimate(ratio=ratio, knob=knob, reason=str(err))
+    if pending is None:
+        pending = submit_companions(scene, fmu_dir, Companions(1))
     series, seconds = [run_series], 0.0
-    for value in values:
-        t0 = time.perf_counter()
-        try:
-            result = run_scene(companion_scene(scene, knob, value),
-                               RunOptions(out=None, fmu_dir=fmu_dir, progress=False))
-        except RunError as err:
-            return Estimate(ratio=ratio, knob=knob, companion_seconds=seconds +
-                            time.perf_counter() - t0,
-                            reason=f"the companion run at {knob} {value:g} stopped: {err}")
-        seconds += time.perf_counter() - t0
-        series.append(recorder_series(result.recorder))
+    for value, companion in pending:
+        run = companion.result()
+        seconds += run.wall_seconds
+        if run.series is None:
+            return Estimate(ratio=ratio, knob=knob, companion_seconds=seconds,
+                            reason=f"the companion run at {knob} {value:g} stopped: "
+                                   f"{run.reason}")
+        series.append(run.series)
     est = richardson(metric, series, ratio, knob, *order_rule(variable, m.extrapolation))
     est.companion_seconds = seconds
     if est.ok and est.error < FLOOR_FACTOR * m.fmu_tolerance:  # say it: no number hides it

@@ -13,6 +13,9 @@ it. Typically three runs (two of them coarse) when the prediction lands two halv
 start, five when it jumps further. No run is repeated: the accepted run is written as it ran.
 (An estimate from the jump itself, h0/2 to h0/32, trusted the coarse runs' order: on the servo
 press it was 70x too low.)
+With jobs > 1 each round's coarser runs execute in a worker process beside the finest, which
+runs here (cosim/companions.py): the same runs and the same choice, in the wall time of the
+slower side.
 Candidates, in order: the scene's master with extrapolation 2, then Gauss-Seidel with
 extrapolation 2 and 1 (the next is tried when one cannot meet the target). A variable-step
 master in the scene is searched over its tolerance instead (companion at a tenth of it).
@@ -74,20 +77,24 @@ def candidates(scene) -> list[tuple[str, int]]:
     return list(dict.fromkeys([first, ("gauss-seidel", 2), ("gauss-seidel", 1)]))
 
 
-def search(scene, target: float, fmu_dir=None):
+def search(scene, target: float, fmu_dir=None, jobs: int = 1):
     """(RunResult of the chosen run with its estimate, TargetReport); raises TargetNotMet
-    with the report's reasons when no candidate meets the target."""
+    with the report's reasons when no candidate meets the target. `jobs` > 1: the companions
+    of each run execute in worker processes beside it (cosim/companions.py)."""
     from ..masters import MASTERS
+    from .companions import Companions
     if not (target > 0 and math.isfinite(target)):
         raise ValueError(f"--target must be a positive number, got {target!r}")
     scene = with_metric_record(scene)
     report = TargetReport(target)
     wall = time.perf_counter()
+    pool = Companions(jobs)  # its workers start while the FMUs are checked
     try:
+        fmu_dir = _built_fmus(scene, fmu_dir)
         for algorithm, extrapolation in candidates(scene):
             variable = bool(getattr(MASTERS.get(algorithm), "variable_step", False))
             walk = _tolerance_walk if variable else _step_ladder
-            found = walk(scene, algorithm, extrapolation, target, fmu_dir, report)
+            found = walk(scene, algorithm, extrapolation, target, fmu_dir, report, pool)
             if found is not None:
                 result, est, trial = found
                 report.met = True
@@ -97,9 +104,21 @@ def search(scene, target: float, fmu_dir=None):
                 result.estimate = est
                 return result, report
     finally:
+        pool.close(abandon=True)  # a companion still running is of no use any more
         report.wall_seconds = time.perf_counter() - wall
     raise TargetNotMet(f"no setting met the estimated error {target:g}: " +
                        "; ".join(report.reasons))
+
+
+def _built_fmus(scene, fmu_dir):
+    """The FMU folder, with every FMU of the scene built: the workers load them, and two
+    processes must not build into one folder at once."""
+    from ..system.wiring import default_fmu_dir, resolve_fmu
+    from pathlib import Path
+    fmu_dir = Path(fmu_dir) if fmu_dir is not None else default_fmu_dir(scene)
+    for name in scene.components:
+        resolve_fmu(scene, name, fmu_dir)
+    return fmu_dir
 
 
 def _trial(scene, algorithm, extrapolation, step=None, tolerance=None):
@@ -134,7 +153,7 @@ def _run(trial, fmu_dir, report):
                             time.perf_counter() - t0))
 
 
-def _step_ladder(scene, algorithm, extrapolation, target, fmu_dir, report):
+def _step_ladder(scene, algorithm, extrapolation, target, fmu_dir, report, pool):
     """The step search (module docstring); (result, estimate, trial) or None. Steps are
     h0 / 2^k; `rungs` maps k to the run's (series, result)."""
     metric = scene_metric(scene)
@@ -146,20 +165,24 @@ def _step_ladder(scene, algorithm, extrapolation, target, fmu_dir, report):
     h0 = scene.master.step * START_FACTOR
     while h0 > scene.master.step and h0 > (scene.stop_time - scene.start_time) / MIN_START_STEPS:
         h0 /= 2.0
+
+    def run(ks):
+        return _run_rungs(scene, algorithm, extrapolation, h0, ks, fmu_dir, report, pool)
+
     rungs: dict[int, tuple] = {}
-    k0 = 0  # the coarsest rung that ran (a coarse start that stops moves it down)
-    while len(rungs) < 2:  # two coarse runs: a first estimate with the design order
-        k = k0 + len(rungs)
-        if h0 / 2 ** k < h_min:
+    k0, ks = 0, [0, 1]  # k0: the coarsest rung that ran (a coarse start that stops moves it down)
+    while ks:  # two coarse runs: a first estimate with the design order
+        if h0 / 2 ** max(ks) < h_min:
             return _fail(report, f"{label}: the step would fall below {h_min:g} s")
-        ran = _rung(scene, algorithm, extrapolation, h0 / 2 ** k, fmu_dir, report)
-        if isinstance(ran, str):
-            if rungs:
+        for k, ran in sorted(run(ks).items()):
+            if isinstance(ran, str) and k == k0:
+                k0 += 1
+            elif isinstance(ran, str):
                 return _fail(report, f"{label}: {ran}")
-            k0 += 1
-            continue
-        rungs[k] = ran
-    est = richardson_steps(metric, [(h0 / 2 ** k, rungs[k][0]) for k in sorted(rungs)], nominal)
+            else:
+                rungs[k] = ran
+        ks = [k for k in (k0, k0 + 1) if k not in rungs]
+    est = richardson_steps(metric, [(h0 / 2 ** k, rungs[k][0]) for k in (k0, k0 + 1)], nominal)
     k_run, last_error = k0 + 1, math.inf
     for _ in range(MAX_STEP_RUNS):
         # the next run: the step predicted to meet target x SAFETY, at least two halvings
@@ -168,12 +191,11 @@ def _step_ladder(scene, algorithm, extrapolation, target, fmu_dir, report):
         if h0 / 2 ** k_new < h_min * (1 - 1e-9):
             return _fail(report, f"{label}: the step would fall below {h_min:g} s "
                                  f"({MIN_STEP_FACTOR:g} x the scene's step)")
-        for k in (k_new - 2, k_new - 1, k_new):  # its companions first, then the run
-            if k not in rungs:
-                ran = _rung(scene, algorithm, extrapolation, h0 / 2 ** k, fmu_dir, report)
-                if isinstance(ran, str):
-                    return _fail(report, f"{label}: {ran}")
-                rungs[k] = ran
+        ran = run([k for k in (k_new - 2, k_new - 1, k_new) if k not in rungs])
+        stopped = [r for r in ran.values() if isinstance(r, str)]
+        if stopped:
+            return _fail(report, f"{label}: {stopped[0]}")
+        rungs.update(ran)
         k_run = k_new
         est = richardson(metric, [rungs[k][0] for k in (k_new, k_new - 1, k_new - 2)], 2.0,
                          "step", nominal, bounds)  # the estimator of `crankfmu run`
@@ -190,6 +212,25 @@ def _step_ladder(scene, algorithm, extrapolation, target, fmu_dir, report):
         if est.ok:
             last_error = est.error
     return _fail(report, f"{label}: {MAX_STEP_RUNS} estimates without meeting the target")
+
+
+def _run_rungs(scene, algorithm, extrapolation, h0, ks, fmu_dir, report, pool) -> dict:
+    """Runs at the steps h0 / 2^k, k in ks: the finest here (the one the search may accept and
+    write), the others in the pool's workers beside it (cosim/companions.py). {k: (series,
+    result)}, or for a run that stopped {k: the reason}."""
+    finest = max(ks)
+    from .runner import run_companion
+    pending = {k: pool.submit(run_companion, _trial(scene, algorithm, extrapolation,
+                                                    step=h0 / 2 ** k), fmu_dir)
+               for k in ks if k != finest}
+    ran = {finest: _rung(scene, algorithm, extrapolation, h0 / 2 ** finest, fmu_dir, report)}
+    for k, companion in pending.items():
+        done = companion.result()
+        report.runs.append((algorithm, extrapolation, h0 / 2 ** k, scene.master.tolerance,
+                            done.wall_seconds))
+        ran[k] = (done.series, done) if done.series is not None else \
+            f"the run at step {h0 / 2 ** k:g} s stopped: {done.reason}"
+    return ran
 
 
 def _rung(scene, algorithm, extrapolation, h, fmu_dir, report):
@@ -213,20 +254,23 @@ def _halvings(est: Estimate, target: float) -> int:
     return min(MAX_HALVINGS, max(1, k))
 
 
-def _tolerance_walk(scene, algorithm, extrapolation, target, fmu_dir, report):
-    """A variable-step master: tolerance from the target, tightened by the estimate's ratio."""
-    from .runner import estimate_run
+def _tolerance_walk(scene, algorithm, extrapolation, target, fmu_dir, report, pool):
+    """A variable-step master: tolerance from the target, tightened by the estimate's ratio;
+    each run's companion (a tenth of its tolerance) runs in the pool beside it."""
+    from .runner import estimate_run, submit_companions
     label = f"{algorithm}, extrapolation {extrapolation}"
     tol = target
     for _ in range(MAX_TOLERANCE_TRIES):
         trial = _trial(scene, algorithm, extrapolation, tolerance=tol)
+        pending = submit_companions(trial, fmu_dir, pool)
         result, why = _run(trial, fmu_dir, report)
         if result is None:
+            for _, companion in pending:
+                companion.cancel()
             report.reasons.append(f"{label}: the run at tolerance {tol:g} stopped: {why}")
             return None
-        est = estimate_run(trial, recorder_series(result.recorder), fmu_dir)
-        _, _, (companion,) = companion_knobs(True, trial.master.step, tol)
-        report.runs.append((algorithm, extrapolation, trial.master.step, companion,
+        est = estimate_run(trial, recorder_series(result.recorder), fmu_dir, pending)
+        report.runs.append((algorithm, extrapolation, trial.master.step, pending[0][0],
                             est.companion_seconds))
         if not est.ok:
             report.reasons.append(f"{label}: no estimate at tolerance {tol:g}: {est.reason}")

@@ -1,0 +1,93 @@
+"""Companion runs (the error estimate's, the `--target` search's) beside the main run.
+
+An estimate needs the run and at least one companion run of the same scene at another setting
+(cosim/estimate.py), and on most scenes a companion costs about what the run costs (the FMUs'
+own integration dominates, not the communication steps). The runs are independent, so with a
+spare core the companions run in a worker process while this process runs the main run: the
+estimate then costs the slower of the two in wall time instead of their sum.
+
+    Companions(jobs)      jobs = 1: each companion runs in this process when its result is
+                          asked for (after the main run), as before; jobs > 1: a pool of
+                          jobs - 1 spawned workers (a fresh interpreter each, nothing inherited;
+                          the pool starts when the object is made, so its start-up overlaps the
+                          parent's own work).
+    submit(run, *args) -> Pending; Pending.result() -> run(*args), a CompanionRun
+                          (run: a module-level function, cosim.runner.run_companion)
+
+A run's numbers are a function of its scene and the FMU files only, so a companion gives the same
+series wherever it ran (tests/test_companions.py). The FMUs must exist in fmu_dir before a worker
+loads them (the parent builds them: two processes would otherwise build into one folder).
+"""
+from __future__ import annotations
+
+import multiprocessing
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+
+
+@dataclass
+class CompanionRun:
+    series: tuple | None   # (times, columns) as estimate.recorder_series gives; None: it stopped
+    wall_seconds: float
+    reason: str = ""       # why it stopped
+
+
+def default_jobs() -> int:
+    """The command line's default: 2 processes where the machine has a second core."""
+    return 2 if (os.cpu_count() or 1) >= 2 else 1
+
+
+def _ready() -> int:
+    return os.getpid()
+
+
+class Pending:
+    """A companion submitted: in a worker (a future) or to run here when asked for."""
+
+    def __init__(self, future=None, call=None):
+        self._future, self._call, self._done = future, call, None
+
+    def result(self) -> CompanionRun:
+        if self._done is None:
+            self._done = self._future.result() if self._future is not None else self._call()
+        return self._done
+
+    def cancel(self) -> None:
+        if self._future is not None:
+            self._future.cancel()
+
+
+class Companions:
+    """Where companion runs execute (module docstring). Use as a context manager."""
+
+    def __init__(self, jobs: int = 1):
+        self.jobs = max(1, int(jobs))
+        self._pool = None
+        if self.jobs > 1:
+            self._pool = ProcessPoolExecutor(max_workers=self.jobs - 1,
+                                             mp_context=multiprocessing.get_context("spawn"))
+            self._pool.submit(_ready)  # start the workers now, while the parent loads the FMUs
+
+    def submit(self, run, *args) -> Pending:
+        if self._pool is None:
+            return Pending(call=lambda: run(*args))
+        return Pending(future=self._pool.submit(run, *args))
+
+    def close(self, abandon: bool = False) -> None:
+        """Shut the workers down; `abandon`: stop them even in the middle of a run (the main
+        run stopped, or the search is done: nobody will ask for the result)."""
+        if self._pool is None:
+            return
+        if abandon:  # the pool has no public kill; its worker processes are what runs
+            for process in list(getattr(self._pool, "_processes", {}).values()):
+                process.terminate()
+        self._pool.shutdown(wait=not abandon, cancel_futures=True)
+        self._pool = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, *exc):
+        self.close(abandon=exc_type is not None)
