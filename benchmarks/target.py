@@ -1,7 +1,7 @@
 """What `crankfmu run --target TOL` costs against the cheapest setting of the offline sweep.
 
     PYTHONPATH=sources python benchmarks/target.py [--out results/accuracy_tables]
-        [--scenes hammer,servo_press] [--targets 1e-3,1e-5] [--jobs 1,2]
+        [--scenes hammer,servo_press] [--targets 1e-3,1e-5] [--jobs 1,2] [--start-factor 128]
 
 Per scene and target: the search (crankfmu.cosim.target.search, in this process, wall time of
 all its runs), the setting it chose, its estimate and its true error against the cached
@@ -21,8 +21,6 @@ import statistics
 import sys
 import time
 from pathlib import Path
-
-import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -69,6 +67,7 @@ def timed_run(scene, setting, fmu_dir, repeats: int = 3) -> float:
 
 def main(argv=None) -> int:
     from crankfmu.cosim.estimate import scene_metric, with_metric_record
+    from crankfmu.cosim import target as target_module
     from crankfmu.cosim.target import TargetNotMet, search
     from crankfmu.studies.accuracy.sweep import _read_reference
     from crankfmu.system.load import load_scene
@@ -79,7 +78,11 @@ def main(argv=None) -> int:
     ap.add_argument("--scenes")
     ap.add_argument("--targets", default="1e-3,1e-5")
     ap.add_argument("--jobs", default="1,2", help="the search's processes, each timed")
+    ap.add_argument("--start-factor", type=float,
+                    help="the search's first step x the scene's step (default: START_FACTOR)")
     args = ap.parse_args(argv)
+    if args.start_factor:
+        target_module.START_FACTOR = args.start_factor
     targets = [float(x) for x in args.targets.split(",")]
     jobs_list = [int(x) for x in args.jobs.split(",")]
     paths = sorted((ROOT / "scenarios").glob("*.toml"))

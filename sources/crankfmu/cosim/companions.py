@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
@@ -32,6 +31,7 @@ class CompanionRun:
     series: tuple | None   # (times, columns) as estimate.recorder_series gives; None: it stopped
     wall_seconds: float
     reason: str = ""       # why it stopped
+    result: object = None  # the cosim.runner.RunResult (the --target search may choose it)
 
 
 def default_jobs() -> int:

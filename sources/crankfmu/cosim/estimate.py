@@ -14,16 +14,14 @@ variable-step master's tolerance (p = 1: about 1.1 d). The finer run is nearer t
 range than the run, so d measures the run's own error; coarse companions (2h and 4h, the order
 observed from the three runs) were cheaper but off more often: scripts/error_estimate.py
 measured the variants over the accuracy sweeps (README, "How wrong is a run, without a
-reference"). The `--target` search (cosim/target.py) uses the coarse form on its own runs
-(`richardson` with two companions and `coarse_bounds`; `richardson_steps` for any step ratios).
+reference"). The `--target` search (cosim/target.py) uses the same form on its own runs.
 
 Cost: the companion takes twice the run's communication steps (fixed step) or the steps of a
 tenth of the tolerance (about 10^(1/(extrapolation + 1)) x); the FMUs' own integration does not
 grow with the step count, so the wall time grows less (README). With a spare core it runs in a
 worker beside the run (cosim/companions.py; `crankfmu run --jobs`). When it is wrong: the
 companion counts other events than the run (no estimate, the reason says so) or stops (no
-estimate), the run sits at the FMUs' tolerance floor (the difference is solver noise), an input
-is sampled off the step grid (the error does not follow a power of the step).
+estimate), the run sits at the FMUs' tolerance floor (the difference is solver noise).
 """
 from __future__ import annotations
 
@@ -191,48 +189,3 @@ def format_estimate(est: Estimate) -> str:
     return (f"estimated error {est.error:.2e} (Richardson from {where}, order {est.order:.2f} "
             f"{est.order_source}; the companion runs took {est.companion_seconds:.2f} s)"
             + (f"; {est.reason}" if est.reason else ""))
-
-
-def richardson_steps(metric: Metric, runs: list[tuple], nominal: float,
-                     bounds: tuple[float, float] | None = None) -> Estimate:
-    """The estimate of the last of `runs` = [(step, (times, columns)), ...], 2 or 3 runs of one
-    master with decreasing steps in any ratios (the `--target` search jumps). With e(h) = C h^p:
-    d(h_i, h_j) = C |h_i^p - h_j^p|; two runs use p = `nominal`; three observe p from
-    d12 / d23 = (h1^p - h2^p) / (h2^p - h3^p) (clamped to `bounds`). Then
-    e(h_last) = d_last h_last^p / (h_prev^p - h_last^p) (for h_prev = 2 h_last: d / (2^p - 1))."""
-    steps = [h for h, _ in runs]
-    est = Estimate(ratio=steps[-2] / steps[-1], knob="step")
-    d_last, why = difference(metric, runs[-1][1], runs[-2][1])
-    est.differences.append(d_last)
-    if not math.isfinite(d_last):
-        est.reason = why or "the companion run differs without bound"
-        return est
-    est.order, est.order_source = nominal, "nominal"
-    if len(runs) >= 3:
-        d_first, why_first = difference(metric, runs[-2][1], runs[-3][1])
-        est.differences.insert(0, d_first)
-        if math.isfinite(d_first) and d_first > 0 and d_last > 0:
-            lo, hi = bounds or (ORDER_MIN, ORDER_MAX)
-            est.order = _observed_order(steps[-3:], d_first / d_last, lo, hi)
-            est.order_source = "observed"
-        elif why_first:
-            est.reason = f"order not observed ({why_first}); nominal order used"
-    h_prev, h = steps[-2] ** est.order, steps[-1] ** est.order
-    est.error = d_last * h / (h_prev - h)
-    return est
-
-
-def _observed_order(steps, ratio: float, lo: float, hi: float) -> float:
-    """p in [lo, hi] with (h1^p - h2^p) / (h2^p - h3^p) = ratio (increasing in p), bisected."""
-    h1, h2, h3 = steps
-
-    def f(p):
-        return (h1 ** p - h2 ** p) / (h2 ** p - h3 ** p)
-    if ratio <= f(lo):
-        return lo
-    if ratio >= f(hi):
-        return hi
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if f(mid) < ratio else (lo, mid)
-    return 0.5 * (lo + hi)

@@ -320,7 +320,8 @@ def run_companion(scene, fmu_dir):
         result = run_scene(scene, RunOptions(out=None, fmu_dir=fmu_dir, progress=False))
     except CrankfmuError as err:  # RunError (it stopped) or a refused setting (too many steps)
         return CompanionRun(None, time.perf_counter() - t0, str(err))
-    return CompanionRun(recorder_series(result.recorder), time.perf_counter() - t0)
+    return CompanionRun(recorder_series(result.recorder), time.perf_counter() - t0,
+                        result=result)
 
 
 def submit_companions(scene, fmu_dir, companions) -> list:

@@ -1,28 +1,30 @@
 """`crankfmu run SCENE --target TOL`: choose master, extrapolation and step for a requested
 global error without a reference, from the error estimate (cosim/estimate.py).
 
-Fixed-step masters: two runs at a coarse step h0 = the scene's step x START_FACTOR and h0/2
-give a first estimate (the design order p0 = extrapolation + 1); the step h that would meet
-target x SAFETY is predicted from it (as h0 / 2^k, so every step is a rung of one ladder) and
-run with its companions 2h and 4h (those not run yet); the run's estimate is Richardson from
-those two coarser runs with the order observed within [p0, p0 + 1] (cosim.estimate.richardson,
-coarse_bounds: the search's own runs are the companions, at no extra cost; `crankfmu run`
-uses a finer companion instead, which was right more often but would cost another run here).
-The search stops at the first run whose estimate meets the target, else predicts again from
-it. Typically three runs (two of them coarse) when the prediction lands two halvings below the
-start, five when it jumps further. No run is repeated: the accepted run is written as it ran.
-(An estimate from the jump itself, h0/2 to h0/32, trusted the coarse runs' order: on the servo
-press it was 70x too low.)
-With jobs > 1 each round's coarser runs execute in a worker process beside the finest, which
-runs here (cosim/companions.py): the same runs and the same choice, in the wall time of the
-slower side.
+Fixed-step masters: the steps tried are rungs h0 / 2^k of one ladder, h0 = the scene's step x
+START_FACTOR (halved until the run has MIN_START_STEPS steps). Each round runs a candidate
+step h and its companion h/2 and estimates the candidate's error as `crankfmu run` does
+(Richardson with the design order p0 = extrapolation + 1: cosim.estimate.richardson). The
+search accepts the first candidate whose estimate meets the target and writes that run as it
+ran (no run is repeated); otherwise it predicts the halvings that would bring the error to
+target x SAFETY (with the order observed from three consecutive rungs once there are three,
+else p0) and runs the next round. A candidate one halving down costs one new run (its
+companion); a coarse start that stops moves the ladder down. Typically two runs when the start
+already meets the target, three or four otherwise.
+(The search used to estimate from the coarser rungs 2h and 4h, which costs no extra run but was
+right less often: on the conventional press and the clutch hammer it accepted runs 2.7x and
+1.4x above the target. The companion at h/2 is the form measured within 3x in 93 % of the
+sweeps' runs: README, "How wrong is a run".)
+With jobs > 1 a round's two runs go side by side, the finer (slower) here and the other in a
+worker process (cosim/companions.py): the same runs and the same choice, in the wall time of
+the slower one.
 Candidates, in order: the scene's master with extrapolation 2, then Gauss-Seidel with
 extrapolation 2 and 1 (the next is tried when one cannot meet the target). A variable-step
 master in the scene is searched over its tolerance instead (companion at a tenth of it).
 
 It cannot meet the target when every candidate stops (diverges, events differ between rungs) or
-its estimate stops falling with the step (the FMUs' tolerance floor, an input sampled off the
-step grid), or the step would fall below MIN_STEP_FACTOR x the scene's step; it says which.
+its estimate stops falling with the step (the FMUs' tolerance floor, events that move with the
+step), or the step would fall below MIN_STEP_FACTOR x the scene's step; it says which.
 """
 from __future__ import annotations
 
@@ -33,17 +35,17 @@ from dataclasses import dataclass, field
 
 from ..errors import CrankfmuError
 
-from .estimate import (Estimate, coarse_bounds, companion_knobs, nominal_order,
-                       recorder_series, richardson, richardson_steps, scene_metric,
-                       with_metric_record)
+from .estimate import (STEP_RATIO, Estimate, difference, nominal_order, recorder_series,
+                       richardson, scene_metric, with_metric_record)
 
-START_FACTOR = 128.0     # the first step, x the scene's step: coarse runs are cheap where the
-                         # cost follows the step; an unstable start costs a run (measured
-                         # against 32 in benchmarks/target.py: fewer runs on most scenes)
+START_FACTOR = 32.0      # the first step, x the scene's step (the sweep's coarsest): measured
+                         # against 128 on 10 scenes x 2 targets, fewer or as many runs in 19 of
+                         # 20 cases (servo press at 1e-3: 4 runs against 6), the same targets met
+                         # (benchmarks/target.py --jobs 1 [--start-factor 128])
 MIN_STEP_FACTOR = 1 / 64  # the finest step tried, x the scene's step
 SAFETY = 0.5             # aim the estimate at this fraction of the target
 MAX_TOLERANCE_TRIES = 6  # variable-step master: tolerance updates
-MAX_STEP_RUNS = 8        # fixed-step master: runs per candidate
+MAX_STEP_RUNS = 8        # fixed-step master: rounds (candidate and companion) per candidate
 MAX_HALVINGS = 4         # the largest jump of the step at once: / 2^4
 MIN_START_STEPS = 16     # the coarse start takes at least this many steps
 
@@ -158,68 +160,69 @@ def _step_ladder(scene, algorithm, extrapolation, target, fmu_dir, report, pool)
     h0 / 2^k; `rungs` maps k to the run's (series, result)."""
     metric = scene_metric(scene)
     label = f"{algorithm}, extrapolation {extrapolation}"
-    nominal, bounds = nominal_order(extrapolation), coarse_bounds(extrapolation)
+    nominal = nominal_order(extrapolation)
     h_min = scene.master.step * MIN_STEP_FACTOR
     # at least MIN_START_STEPS steps over the run: a step longer than the run is no step
     # (a power of 2 x the scene's step, so the steps tried are those of the accuracy sweep)
     h0 = scene.master.step * START_FACTOR
     while h0 > scene.master.step and h0 > (scene.stop_time - scene.start_time) / MIN_START_STEPS:
         h0 /= 2.0
-
-    def run(ks):
-        return _run_rungs(scene, algorithm, extrapolation, h0, ks, fmu_dir, report, pool)
-
     rungs: dict[int, tuple] = {}
-    k0, ks = 0, [0, 1]  # k0: the coarsest rung that ran (a coarse start that stops moves it down)
-    while ks:  # two coarse runs: a first estimate with the design order
-        if h0 / 2 ** max(ks) < h_min:
-            return _fail(report, f"{label}: the step would fall below {h_min:g} s")
-        for k, ran in sorted(run(ks).items()):
-            if isinstance(ran, str) and k == k0:
-                k0 += 1
-            elif isinstance(ran, str):
-                return _fail(report, f"{label}: {ran}")
-            else:
-                rungs[k] = ran
-        ks = [k for k in (k0, k0 + 1) if k not in rungs]
-    est = richardson_steps(metric, [(h0 / 2 ** k, rungs[k][0]) for k in (k0, k0 + 1)], nominal)
-    k_run, last_error = k0 + 1, math.inf
+    k, last_error = 0, math.inf  # k: the candidate rung; k + 1 is its companion
     for _ in range(MAX_STEP_RUNS):
-        # the next run: the step predicted to meet target x SAFETY, at least two halvings
-        # below the coarsest rung, so that its companions (2h, 4h) are rungs too
-        k_new = max(k0 + 2, k_run + _halvings(est, target) if est.ok else k_run + 1)
-        if h0 / 2 ** k_new < h_min * (1 - 1e-9):
+        if h0 / 2 ** (k + 1) < h_min * (1 - 1e-9):
             return _fail(report, f"{label}: the step would fall below {h_min:g} s "
                                  f"({MIN_STEP_FACTOR:g} x the scene's step)")
-        ran = run([k for k in (k_new - 2, k_new - 1, k_new) if k not in rungs])
+        ran = _run_rungs(scene, algorithm, extrapolation, h0,
+                         [j for j in (k, k + 1) if j not in rungs], fmu_dir, report, pool)
+        if isinstance(ran.get(k), str) and not math.isfinite(last_error):
+            # an unstable coarse start: below the finest rung that stopped (a companion that
+            # ran is kept)
+            k = max(j for j, r in ran.items() if isinstance(r, str)) + 1
+            rungs.update({j: r for j, r in ran.items() if not isinstance(r, str)})
+            continue
         stopped = [r for r in ran.values() if isinstance(r, str)]
         if stopped:
             return _fail(report, f"{label}: {stopped[0]}")
         rungs.update(ran)
-        k_run = k_new
-        est = richardson(metric, [rungs[k][0] for k in (k_new, k_new - 1, k_new - 2)], 2.0,
-                         "step", nominal, bounds)  # the estimator of `crankfmu run`
-        h = h0 / 2 ** k_new
+        h = h0 / 2 ** k
+        est = richardson(metric, [rungs[k][0], rungs[k + 1][0]], 1.0 / STEP_RATIO, "step",
+                         nominal)  # the estimator of `crankfmu run`: a companion at h/2
         if est.ok and est.error <= target:
-            # the companions are the search's own runs at 2h and 4h
-            est.companion_seconds = sum(rungs[k][1].wall_seconds for k in (k_new - 1, k_new - 2))
-            return rungs[k_new][1], est, _trial(scene, algorithm, extrapolation, step=h)
-        if est.ok and est.error >= 0.8 * last_error:
+            est.companion_seconds = rungs[k + 1][1].wall_seconds
+            return rungs[k][1], est, _trial(scene, algorithm, extrapolation, step=h)
+        if not est.ok:  # e.g. the companion counts other events: both too coarse
+            k += 1
+            continue
+        if est.error >= 0.8 * last_error:
             return _fail(report, f"{label}: the estimate stopped falling with the step "
                                  f"({last_error:.2e}, then {est.error:.2e} at {h:g} s): the "
-                                 f"FMUs' tolerance floor or an input sampled off the step grid "
-                                 f"limits the error")
-        if est.ok:
-            last_error = est.error
+                                 f"FMUs' tolerance floor or an error that does not follow a power "
+                                 f"of the step (events that move with it) limits the error")
+        last_error = est.error
+        k += _halvings(est.error, _prediction_order(metric, rungs, k, nominal), target)
     return _fail(report, f"{label}: {MAX_STEP_RUNS} estimates without meeting the target")
 
 
+def _prediction_order(metric, rungs: dict, k: int, nominal: float) -> float:
+    """The order to predict the next step with: observed from rungs k - 1, k, k + 1 when all
+    three ran (clamped to [1, nominal + 1]: an order below 1 would predict absurd steps),
+    else the design order."""
+    if k - 1 not in rungs:
+        return nominal
+    d_coarse, _ = difference(metric, rungs[k - 1][0], rungs[k][0])
+    d_fine, _ = difference(metric, rungs[k][0], rungs[k + 1][0])
+    if not (d_coarse > 0 and d_fine > 0 and math.isfinite(d_coarse / d_fine)):
+        return nominal
+    return min(nominal + 1.0, max(1.0, math.log2(d_coarse / d_fine)))
+
+
 def _run_rungs(scene, algorithm, extrapolation, h0, ks, fmu_dir, report, pool) -> dict:
-    """Runs at the steps h0 / 2^k, k in ks: the finest here (the one the search may accept and
-    write), the others in the pool's workers beside it (cosim/companions.py). {k: (series,
-    result)}, or for a run that stopped {k: the reason}."""
-    finest = max(ks)
+    """Runs at the steps h0 / 2^k, k in ks: the finest (the slowest) here, the others in the
+    pool's workers beside it (cosim/companions.py). {k: (series, result)}, or for a run that
+    stopped {k: the reason}."""
     from .runner import run_companion
+    finest = max(ks)
     pending = {k: pool.submit(run_companion, _trial(scene, algorithm, extrapolation,
                                                     step=h0 / 2 ** k), fmu_dir)
                for k in ks if k != finest}
@@ -228,7 +231,7 @@ def _run_rungs(scene, algorithm, extrapolation, h0, ks, fmu_dir, report, pool) -
         done = companion.result()
         report.runs.append((algorithm, extrapolation, h0 / 2 ** k, scene.master.tolerance,
                             done.wall_seconds))
-        ran[k] = (done.series, done) if done.series is not None else \
+        ran[k] = (done.series, done.result) if done.series is not None else \
             f"the run at step {h0 / 2 ** k:g} s stopped: {done.reason}"
     return ran
 
@@ -246,11 +249,12 @@ def _fail(report, reason: str):
     return None
 
 
-def _halvings(est: Estimate, target: float) -> int:
-    """Halvings of the step that bring `est` to target x SAFETY at its order (1..MAX_HALVINGS)."""
-    if est.error <= 0:  # the runs agree exactly: halve, the next estimate observes the order
+def _halvings(error: float, order: float, target: float) -> int:
+    """Halvings of the step that bring `error` to target x SAFETY at `order`
+    (1..MAX_HALVINGS)."""
+    if error <= 0:  # the runs agree exactly: halve, the next estimate observes the order
         return 1
-    k = math.ceil(math.log2(est.error / (SAFETY * target)) / est.order - 1e-9)
+    k = math.ceil(math.log2(error / (SAFETY * target)) / order - 1e-9)
     return min(MAX_HALVINGS, max(1, k))
 
 
