@@ -7,12 +7,13 @@ estimate (crankfmu.cosim.estimate), the true error against the monolithic refere
 Reads the sweeps of `scripts/accuracy_tables.py` (OUT/<scene>/runs; run that first, it
 resumes) and runs the companions it lacks (the adaptive master at 1e-5 and 1e-1) into the same
 folder. The estimate of a run uses the same code as `crankfmu run`'s: its
-companions are the sweep's runs at 2x and 4x its step (runs are deterministic: a run's numbers
+companions are the sweep's own runs at other steps (runs are deterministic: a run's numbers
 are a function of its scene and FMU bytes). Prints, per scene, each variant of the estimator
-(fixed step: the order observed from the second companion clamped to [p, p + 1], p =
-extrapolation + 1 (crankfmu's), against clamping to [0.5, 5] and against the nominal order p
-from one companion; adaptive: a companion at a tenth of the tolerance, against
-one at 10x, both with p = 1) with the share of completed runs whose estimate lies within a factor 3 of the truth.
+(fixed step: one companion at h/2 with the design order p = extrapolation + 1 (crankfmu run's
+and --target's), against companions at 2h and 4h with the order observed clamped to [p, p + 1]
+or to [0.5, 5], and one at 2h with p; adaptive: a companion at a tenth of the tolerance, against
+one at 10x, both with p = 1) with the share of completed runs whose estimate lies within a
+factor 3 of the truth.
 """
 from __future__ import annotations
 
@@ -139,8 +140,8 @@ def within(est, truth) -> bool:
 
 
 VARIANTS = ("fine", "bounded", "observed", "nominal")  # the first is crankfmu run's estimator
-LABELS = {"fine": "h/2 companion, order p0 (crankfmu run's)",
-          "bounded": "2h and 4h, order observed in [p0, p0+1] (--target's)",
+LABELS = {"fine": "h/2 companion, order p0 (crankfmu run's and --target's)",
+          "bounded": "2h and 4h, order observed in [p0, p0+1]",
           "observed": "2h and 4h, order observed in [0.5, 5]",
           "nominal": "2h, order p0"}
 FLOOR = 10 * 1e-8  # FLOOR_FACTOR x the FMUs' tolerance of every shipped scene (studies/accuracy)
