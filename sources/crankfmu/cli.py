@@ -77,10 +77,10 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
                         "extrapolation and step from the error estimate ([master].target)")
     p.add_argument("--no-estimate", action="store_true",
                    help="skip the error estimate (its companion runs cost about 0.75 x the run)")
-    p.add_argument("--jobs", type=_positive_integer, default=None,
+    p.add_argument("--jobs", type=_positive_integer, default=1,
                    help="processes for the run and the companion runs of its estimate (and of "
-                        "--target's search): 2 runs the companions in a worker beside the run; "
-                        "1 after it, in this process (default: 2 where the machine has 2 cores)")
+                        "--target's search): 2 runs the companions in a worker beside the run "
+                        "(pays on runs of seconds with a free core); 1 (default) after it, here")
 
 
 def _positive_integer(text: str) -> int:
@@ -132,7 +132,6 @@ def _master_options_from(args, scene) -> None:
 
 
 def cmd_run(args) -> int:
-    from .cosim.companions import default_jobs
     from .cosim.runner import RunOptions, run_scene
     from .system.scene import _number
 
@@ -141,22 +140,21 @@ def cmd_run(args) -> int:
     if args.target is not None:
         scene.master.target = _number(scene.path, "--target", args.target, positive=True,
                                       maximum=1.0)
-    jobs = args.jobs if args.jobs is not None else default_jobs()
     if scene.master.target is not None:
-        return _run_target(scene, out, args, jobs)
+        return _run_target(scene, out, args)
     result = run_scene(scene, RunOptions(out=out, plot=args.plot, fmu_dir=args.fmus,
                                          progress=False if args.no_progress else None,
                                          verbose_log=args.log, estimate=not args.no_estimate,
-                                         jobs=jobs))
+                                         jobs=args.jobs))
     _print_run(scene, result)
     return 0
 
 
-def _run_target(scene, out: Path, args, jobs: int) -> int:
+def _run_target(scene, out: Path, args) -> int:
     """--target: search the setting (crankfmu.cosim.target), write the chosen run."""
     from .cosim.target import TargetNotMet, search, write_chosen
     try:
-        result, report = search(scene, scene.master.target, args.fmus, jobs)
+        result, report = search(scene, scene.master.target, args.fmus, args.jobs)
     except TargetNotMet as err:
         print(f"{scene.name}: target not met. {err}")
         return 1

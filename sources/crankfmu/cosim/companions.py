@@ -14,6 +14,10 @@ estimate then costs the slower of the two in wall time instead of their sum.
     submit(run, *args) -> Pending; Pending.result() -> run(*args), a CompanionRun
                           (run: a module-level function, cosim.runner.run_companion)
 
+Measured (benchmarks/estimate_cost.py, README "What it costs"): a worker takes 0.5-0.8 s to
+start and needs a free core; on a 2-core machine with one core busy it paid only on runs of
+several seconds, so the command line's default is 1.
+
 A run's numbers are a function of its scene and the FMU files only, so a companion gives the same
 series wherever it ran (tests/test_companions.py). The FMUs must exist in fmu_dir before a worker
 loads them (the parent builds them: two processes would otherwise build into one folder).
@@ -32,11 +36,6 @@ class CompanionRun:
     wall_seconds: float
     reason: str = ""       # why it stopped
     result: object = None  # the cosim.runner.RunResult (the --target search may choose it)
-
-
-def default_jobs() -> int:
-    """The command line's default: 2 processes where the machine has a second core."""
-    return 2 if (os.cpu_count() or 1) >= 2 else 1
 
 
 def _ready() -> int:

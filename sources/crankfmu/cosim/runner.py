@@ -76,8 +76,8 @@ class RunOptions:
     # "error_estimate"; off for the runs of studies, which compare against a reference
     estimate: bool = False
     # processes for the run and its companions (cosim/companions.py): 1 runs the companions
-    # here after the run; 2 runs them in a worker beside it (the command line's default where
-    # the machine has a second core)
+    # here after the run; 2 runs them in a worker beside it (pays on long runs with a free core:
+    # benchmarks/estimate_cost.py)
     jobs: int = 1
 
 
