@@ -154,7 +154,8 @@ def _run_target(scene, out: Path, args) -> int:
     """--target: search the setting (crankfmu.cosim.target), write the chosen run."""
     from .cosim.target import TargetNotMet, search, write_chosen
     try:
-        result, report = search(scene, scene.master.target, args.fmus, args.jobs)
+        echo = None if args.no_progress else lambda line: print(line, file=sys.stderr)
+        result, report = search(scene, scene.master.target, args.fmus, args.jobs, echo)
     except TargetNotMet as err:
         print(f"{scene.name}: target not met. {err}")
         return 1

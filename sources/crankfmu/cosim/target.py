@@ -35,8 +35,8 @@ from dataclasses import dataclass, field
 
 from ..errors import CrankfmuError
 
-from .estimate import (STEP_RATIO, Estimate, difference, nominal_order, recorder_series,
-                       richardson, scene_metric, with_metric_record)
+from .estimate import (STEP_RATIO, Estimate, difference, nominal_order, richardson,
+                       scene_metric, with_metric_record)
 
 START_FACTOR = 32.0      # the first step, x the scene's step (the sweep's coarsest): measured
                          # against 128 on 10 scenes x 2 targets, fewer or as many runs in 19 of
@@ -66,6 +66,20 @@ class TargetReport:
     runs: list = field(default_factory=list)  # (algorithm, extrapolation, step, tol, seconds)
     wall_seconds: float = 0.0
     reasons: list = field(default_factory=list)
+    echo: object = None  # a callable taking a line of progress (the command line prints it)
+
+    def add_run(self, algorithm, extrapolation, step, tolerance, seconds, how="") -> None:
+        self.runs.append((algorithm, extrapolation, step, tolerance, seconds))
+        self.say(f"run {len(self.runs)}: {algorithm}, extrapolation {extrapolation}, "
+                 f"{how or f'step {step:g} s'}: {seconds:.2f} s")
+
+    def say(self, line: str) -> None:
+        if self.echo is not None:
+            self.echo(line)
+
+    def say_estimate(self, setting: str, est: Estimate) -> None:
+        self.say(f"  estimated error at {setting}: " + (
+            f"{est.error:.2e} (target {self.target:g})" if est.ok else f"none ({est.reason})"))
 
     def to_json(self) -> dict:
         return {"target": self.target, "met": self.met, "algorithm": self.algorithm,
@@ -79,16 +93,17 @@ def candidates(scene) -> list[tuple[str, int]]:
     return list(dict.fromkeys([first, ("gauss-seidel", 2), ("gauss-seidel", 1)]))
 
 
-def search(scene, target: float, fmu_dir=None, jobs: int = 1):
+def search(scene, target: float, fmu_dir=None, jobs: int = 1, echo=None):
     """(RunResult of the chosen run with its estimate, TargetReport); raises TargetNotMet
     with the report's reasons when no candidate meets the target. `jobs` > 1: the companions
-    of each run execute in worker processes beside it (cosim/companions.py)."""
+    of each run execute in worker processes beside it (cosim/companions.py). `echo`: called
+    with a line after each run and each estimate (progress)."""
     from ..masters import MASTERS
     from .companions import Companions
     if not (target > 0 and math.isfinite(target)):
         raise ValueError(f"--target must be a positive number, got {target!r}")
     scene = with_metric_record(scene)
-    report = TargetReport(target)
+    report = TargetReport(target, echo=echo)
     wall = time.perf_counter()
     pool = Companions(jobs)  # its workers start while the FMUs are checked
     try:
@@ -134,25 +149,14 @@ def _trial(scene, algorithm, extrapolation, step=None, tolerance=None):
     return trial
 
 
-def _run(trial, fmu_dir, report):
-    """(RunResult, None) or (None, reason)."""
-    from .runner import RunError, RunOptions, check_run_size, run_scene
+def _run(trial, fmu_dir, report, how: str = ""):
+    """The run of `trial` here: a CompanionRun (result None and a reason if it stopped or its
+    setting was refused)."""
+    from .runner import run_companion
+    done = run_companion(trial, fmu_dir)
     m = trial.master
-    t0 = time.perf_counter()
-    try:
-        check_run_size(trial)
-        result = run_scene(trial, RunOptions(out=None, fmu_dir=fmu_dir, progress=False))
-        return result, None
-    except RunError as err:
-        return None, str(err)
-    except Exception as err:  # a refused setting (SceneError: too many steps, a master's check)
-        from ..errors import CrankfmuError
-        if not isinstance(err, CrankfmuError):
-            raise
-        return None, str(err)
-    finally:
-        report.runs.append((m.algorithm, m.extrapolation, m.step, m.tolerance,
-                            time.perf_counter() - t0))
+    report.add_run(m.algorithm, m.extrapolation, m.step, m.tolerance, done.wall_seconds, how)
+    return done
 
 
 def _step_ladder(scene, algorithm, extrapolation, target, fmu_dir, report, pool):
@@ -188,6 +192,7 @@ def _step_ladder(scene, algorithm, extrapolation, target, fmu_dir, report, pool)
         h = h0 / 2 ** k
         est = richardson(metric, [rungs[k][0], rungs[k + 1][0]], 1.0 / STEP_RATIO, "step",
                          nominal)  # the estimator of `crankfmu run`: a companion at h/2
+        report.say_estimate(f"step {h:g} s", est)
         if est.ok and est.error <= target:
             est.companion_seconds = rungs[k + 1][1].wall_seconds
             return rungs[k][1], est, _trial(scene, algorithm, extrapolation, step=h)
@@ -229,19 +234,21 @@ def _run_rungs(scene, algorithm, extrapolation, h0, ks, fmu_dir, report, pool) -
     ran = {finest: _rung(scene, algorithm, extrapolation, h0 / 2 ** finest, fmu_dir, report)}
     for k, companion in pending.items():
         done = companion.result()
-        report.runs.append((algorithm, extrapolation, h0 / 2 ** k, scene.master.tolerance,
-                            done.wall_seconds))
-        ran[k] = (done.series, done.result) if done.series is not None else \
-            f"the run at step {h0 / 2 ** k:g} s stopped: {done.reason}"
+        report.add_run(algorithm, extrapolation, h0 / 2 ** k, scene.master.tolerance,
+                       done.wall_seconds)
+        ran[k] = _rung_of(done, h0 / 2 ** k)
     return ran
 
 
 def _rung(scene, algorithm, extrapolation, h, fmu_dir, report):
-    """(series, result) of a run at step h, or the reason it stopped."""
-    result, why = _run(_trial(scene, algorithm, extrapolation, step=h), fmu_dir, report)
-    if result is None:
-        return f"the run at step {h:g} s stopped: {why}"
-    return recorder_series(result.recorder), result
+    """(series, result) of a run at step h here, or the reason it stopped."""
+    return _rung_of(_run(_trial(scene, algorithm, extrapolation, step=h), fmu_dir, report), h)
+
+
+def _rung_of(done, h: float):
+    if done.result is None:
+        return f"the run at step {h:g} s stopped: {done.reason}"
+    return done.series, done.result
 
 
 def _fail(report, reason: str):
@@ -267,15 +274,18 @@ def _tolerance_walk(scene, algorithm, extrapolation, target, fmu_dir, report, po
     for _ in range(MAX_TOLERANCE_TRIES):
         trial = _trial(scene, algorithm, extrapolation, tolerance=tol)
         pending = submit_companions(trial, fmu_dir, pool)
-        result, why = _run(trial, fmu_dir, report)
-        if result is None:
+        done = _run(trial, fmu_dir, report, how=f"tolerance {tol:g}")
+        if done.result is None:
             for _, companion in pending:
                 companion.cancel()
-            report.reasons.append(f"{label}: the run at tolerance {tol:g} stopped: {why}")
+            report.reasons.append(f"{label}: the run at tolerance {tol:g} stopped: "
+                                  f"{done.reason}")
             return None
-        est = estimate_run(trial, recorder_series(result.recorder), fmu_dir, pending)
-        report.runs.append((algorithm, extrapolation, trial.master.step, pending[0][0],
-                            est.companion_seconds))
+        result = done.result
+        est = estimate_run(trial, done.series, fmu_dir, pending)
+        report.add_run(algorithm, extrapolation, trial.master.step, pending[0][0],
+                       est.companion_seconds, how=f"tolerance {pending[0][0]:g} (companion)")
+        report.say_estimate(f"tolerance {tol:g}", est)
         if not est.ok:
             report.reasons.append(f"{label}: no estimate at tolerance {tol:g}: {est.reason}")
             return None
