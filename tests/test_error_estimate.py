@@ -98,8 +98,13 @@ def test_accuracy_column_matches_the_run_estimate(tmp_path, rotor_fmus):
 
 def test_target_is_met_without_a_reference(tmp_path, rotor_fmus):
     scene = oscillator(tmp_path, {"algorithm": "gauss-seidel", "step": 5e-3}, stop=0.5)
-    result, report = search(scene, 1e-4, rotor_fmus)
+    progress = []
+    result, report = search(scene, 1e-4, rotor_fmus, echo=progress.append)
     assert report.met and report.estimate.error <= 1e-4
+    # a line per run and per estimate, the last estimate the accepted one's
+    assert sum(line.startswith("run ") for line in progress) == len(report.runs)
+    assert progress[-1] == (f"  estimated error at step {report.step:g} s: "
+                            f"{report.estimate.error:.2e} (target 0.0001)")
     chosen = result.metadata["master"]
     assert (chosen["algorithm"], chosen["extrapolation"]) == ("gauss-seidel", 2)
     # the truth, from the exact solution the search never saw
