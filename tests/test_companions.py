@@ -65,3 +65,22 @@ def test_an_abandoned_worker_is_stopped_not_waited_for():
     pending.cancel()
     # a hang would wait out the 60 s sleep; the worker's start-up and termination take ~1 s
     assert time.perf_counter() - t0 < 20.0
+
+
+def test_a_run_that_stops_does_not_wait_for_its_companion(fmu_dir, monkeypatch):
+    """The main run fails at once; its companion (30 s of the press, several seconds of work)
+    is stopped with it: run_scene raises the run's error without waiting it out."""
+    import pytest
+
+    from crankfmu.cosim import runner
+    scene = _short_servo_press()
+    scene.stop_time = 30.0
+
+    def fail(*args, **kwargs):
+        raise runner.RunError("the main run stopped", None)
+    monkeypatch.setattr(runner, "_run", fail)
+    t0 = time.perf_counter()
+    with pytest.raises(runner.RunError, match="the main run stopped"):
+        run_scene(scene, RunOptions(fmu_dir=fmu_dir, progress=False, estimate=True, jobs=2))
+    # the companion alone takes ~10 s here (60000 steps of 0.5 ms); start-up and stop ~1 s
+    assert time.perf_counter() - t0 < 5.0
