@@ -76,7 +76,8 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
                    help="the global error wanted (the scene's accuracy metric): choose master, "
                         "extrapolation and step from the error estimate ([master].target)")
     p.add_argument("--no-estimate", action="store_true",
-                   help="skip the error estimate (its companion runs cost about 0.75 x the run)")
+                   help="skip the error estimate (its companion at half the step costs "
+                        "1.1-1.7 x the run: README, \"What it costs\")")
     p.add_argument("--jobs", type=_positive_integer, default=1,
                    help="processes for the run and the companion runs of its estimate (and of "
                         "--target's search): 2 runs the companions in a worker beside the run "
