@@ -34,6 +34,15 @@ def rotor_fmu_dir(tmp_path_factory):
     return dest
 
 
+@pytest.fixture(scope="module")
+def one_worker():
+    """The executor `jobs=1` makes (a local pool of one spawned worker), kept for the module:
+    its runs are those of jobs=1, without starting a fresh interpreter for every sweep."""
+    from crankfmu.studies.executor import LocalPoolExecutor
+    with LocalPoolExecutor(1) as pool:
+        yield pool
+
+
 def spinner(tmp_path: Path, stop: float = 2.0) -> Path:
     path = tmp_path / "spinner.toml"
     path.write_text(f"""
@@ -98,12 +107,13 @@ def test_vary_and_grid():
             parse_vary(bad)
 
 
-def test_failed_run_is_a_row_and_the_sweep_resumes(tmp_path, fmu_dir, capsys):
+def test_failed_run_is_a_row_and_the_sweep_resumes(tmp_path, fmu_dir, one_worker):
     """press.l = 0.04 < r = 0.05 cannot assemble: that row says refused (the runner checks the
     parameters with the physics before any FMU starts) with the press's reason, the other rows
     are complete; a second call runs nothing and gives the same table."""
     out = tmp_path / "sweep"
-    kw = dict(stop_time=0.05, from_time=0.0, jobs=1, fmu_dir=fmu_dir, progress=False)
+    kw = dict(stop_time=0.05, from_time=0.0, executor=one_worker, fmu_dir=fmu_dir,
+              progress=False)
     table = sweep(ROOT / "scenarios/servo_press.toml", ["press.l=0.25,0.04,0.3"], out, **kw)
     status = [r["status"] for r in table.rows]
     assert status == ["completed", "refused", "completed"]
@@ -121,36 +131,32 @@ def test_failed_run_is_a_row_and_the_sweep_resumes(tmp_path, fmu_dir, capsys):
         sweep(ROOT / "scenarios/servo_press.toml", ["press.l=0.25,0.3"], out, **kw)
 
 
-def test_resume_after_interruption(tmp_path, rotor_fmu_dir):
+def test_resume_after_interruption(tmp_path, rotor_fmu_dir, one_worker):
     """Rows already in sweep.csv (an interrupted sweep) are kept; only the others run."""
     scene = spinner(tmp_path, stop=1.0)
     out = tmp_path / "s"
-    full = sweep(scene, VARY, out, jobs=1, fmu_dir=rotor_fmu_dir, progress=False, plot=False)
+    full = sweep(scene, VARY, out, executor=one_worker, fmu_dir=rotor_fmu_dir, progress=False,
+                 plot=False)
     lines = (out / "sweep.csv").read_text().splitlines()
     (out / "sweep.csv").write_text("\n".join(lines[:6]) + "\n" + lines[6][:10])  # 5 rows + a cut one
-    resumed = sweep(scene, VARY, out, jobs=1, fmu_dir=rotor_fmu_dir, progress=False, plot=False)
+    resumed = sweep(scene, VARY, out, executor=one_worker, fmu_dir=rotor_fmu_dir,
+                    progress=False, plot=False)
     assert resumed.executed == 7
     same_table(full, resumed)
 
 
 @pytest.fixture(scope="module")
-def serial_table(tmp_path_factory, rotor_fmu_dir):
+def serial_table(tmp_path_factory, rotor_fmu_dir, one_worker):
     tmp = tmp_path_factory.mktemp("serial")
-    return sweep(spinner(tmp), VARY, tmp / "out", jobs=1, fmu_dir=rotor_fmu_dir, progress=False)
+    return sweep(spinner(tmp), VARY, tmp / "out", executor=one_worker, fmu_dir=rotor_fmu_dir,
+                 progress=False)
 
 
 @pytest.fixture(scope="module")
-def cluster():
-    distributed = pytest.importorskip("distributed")
-    import dask
-    # read at start: a run survives one worker death; a worker holds only the run it executes
-    with dask.config.set({"distributed.scheduler.allowed-failures": 1,
-                          "distributed.scheduler.worker-saturation": 1.0}):
-        lc = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                      host="127.0.0.1", dashboard_address=None)
-    with lc:
-        with distributed.Client(lc) as client:
-            yield client
+def cluster(dask_client):
+    """The session's LocalCluster of 2 worker processes (tests/conftest.py: allowed-failures 1,
+    worker-saturation 1.0)."""
+    return dask_client
 
 
 def test_dask_cluster_equals_serial(tmp_path, rotor_fmu_dir, serial_table, cluster):
@@ -191,11 +197,11 @@ def _kill_when_rows(csv: Path, pick_pid, rows: int = 2, timeout: float = 120.0) 
 
 
 @pytest.fixture(scope="module")
-def serial_long(tmp_path_factory, rotor_fmu_dir):
+def serial_long(tmp_path_factory, rotor_fmu_dir, one_worker):
     """12 runs of 5 s (the killed-worker tests need runs still to do after the first row)."""
     tmp = tmp_path_factory.mktemp("serial_long")
     scene = spinner(tmp, stop=5.0)
-    return scene, sweep(scene, VARY, tmp / "out", jobs=1, fmu_dir=rotor_fmu_dir,
+    return scene, sweep(scene, VARY, tmp / "out", executor=one_worker, fmu_dir=rotor_fmu_dir,
                         progress=False, plot=False)
 
 
@@ -203,9 +209,11 @@ def test_killed_local_worker_loses_nothing(tmp_path, rotor_fmu_dir, serial_long)
     """SIGKILL of one pool worker mid-sweep (after the first row): the pool is restarted, the
     runs it lost run again, every row is there and equals the serial table."""
     scene, serial = serial_long
+    others = {p.pid for p in multiprocessing.active_children()}  # e.g. the one_worker pool's
 
     def a_worker():
-        kids = [p for p in multiprocessing.active_children() if p.name.startswith("SpawnProcess")]
+        kids = [p for p in multiprocessing.active_children()
+                if p.name.startswith("SpawnProcess") and p.pid not in others]
         return kids[0].pid if kids else None
     info = _kill_when_rows(tmp_path / "pool" / "sweep.csv", a_worker, rows=1)
     table = sweep(scene, VARY, tmp_path / "pool", jobs=2, fmu_dir=rotor_fmu_dir,
@@ -230,7 +238,7 @@ def test_killed_dask_worker_loses_nothing(tmp_path, rotor_fmu_dir, cluster, seri
     same_table(serial, table)
 
 
-def test_cli_on_a_scheduler_address(tmp_path, rotor_fmu_dir, cluster, capsys):
+def test_cli_on_a_scheduler_address(tmp_path, rotor_fmu_dir, cluster, one_worker, capsys):
     """`crankfmu sweep --scheduler tcp://127.0.0.1:PORT` (the address, not a client object)."""
     from crankfmu.cli import main
 
@@ -240,8 +248,8 @@ def test_cli_on_a_scheduler_address(tmp_path, rotor_fmu_dir, cluster, capsys):
                  "--out", str(out), "--scheduler", cluster.scheduler.address,
                  "--fmus", str(rotor_fmu_dir), "--no-progress"]) == 0
     assert "4 runs (4 executed now, 0 kept" in capsys.readouterr().out
-    serial = sweep(scene, ["r.J=0.3,0.6", "r.d=0.2:1.0:2"], tmp_path / "serial", jobs=1,
-                   fmu_dir=rotor_fmu_dir, progress=False, plot=False)
+    serial = sweep(scene, ["r.J=0.3,0.6", "r.d=0.2:1.0:2"], tmp_path / "serial",
+                   executor=one_worker, fmu_dir=rotor_fmu_dir, progress=False, plot=False)
     header, rows = read_table(out / "sweep.csv")
     assert header == serial.columns
     same_rows(header, rows, serial.rows)
@@ -256,12 +264,12 @@ def hybrid_fmus(tmp_path_factory):
     return dest
 
 
-def test_hybrid_scene_reports_its_event_figures(tmp_path, hybrid_fmus):
+def test_hybrid_scene_reports_its_event_figures(tmp_path, hybrid_fmus, one_worker):
     """The conventional press ([analysis].events): brake energies and the number of mode events
     at the run's end are columns; a stronger ring brake engages faster and dissipates less."""
     table = sweep(ROOT / "scenarios/conventional_press.toml", ["drive.Mp_b=800,1200"],
-                  tmp_path / "out", stop_time=0.6, jobs=1, fmu_dir=hybrid_fmus, progress=False,
-                  plot=False)
+                  tmp_path / "out", stop_time=0.6, executor=one_worker, fmu_dir=hybrid_fmus,
+                  progress=False, plot=False)
     for name in ("drive.E_brake_b", "drive.E_brake_h", "drive.n_events"):
         assert name in table.columns
     assert [r["status"] for r in table.rows] == ["completed", "completed"]
@@ -327,10 +335,11 @@ def test_a_run_that_always_kills_its_dask_worker_is_a_lost_row(tmp_path, rotor_f
     assert "KilledWorker" in outputs[1].reason or "died" in outputs[1].reason
 
 
-def test_latin_hypercube_sweep(tmp_path, rotor_fmu_dir):
+def test_latin_hypercube_sweep(tmp_path, rotor_fmu_dir, one_worker):
     """--samples: N points, one per stratum of each range, the same on a second call (resumed)."""
     scene = spinner(tmp_path, stop=1.0)
-    kw = dict(samples=5, seed=1, jobs=1, fmu_dir=rotor_fmu_dir, progress=False, plot=False)
+    kw = dict(samples=5, seed=1, executor=one_worker, fmu_dir=rotor_fmu_dir, progress=False,
+              plot=False)
     table = sweep(scene, ["r.J=0.3:0.9", "r.d=0.2,1.0"], tmp_path / "lhs", **kw)
     assert len(table) == 5 and all(r["status"] == "completed" for r in table.rows)
     J = np.sort(table.column("r.J"))
