@@ -146,10 +146,18 @@ def test_resume_after_interruption(tmp_path, rotor_fmu_dir, one_worker):
 
 
 @pytest.fixture(scope="module")
-def serial_table(tmp_path_factory, rotor_fmu_dir, one_worker):
+def serial_run(tmp_path_factory, rotor_fmu_dir, one_worker):
+    """(scene, table): the 12 runs of 2 s in one worker, the table every other way of running
+    them must give."""
     tmp = tmp_path_factory.mktemp("serial")
-    return sweep(spinner(tmp), VARY, tmp / "out", executor=one_worker, fmu_dir=rotor_fmu_dir,
-                 progress=False)
+    scene = spinner(tmp)
+    return scene, sweep(scene, VARY, tmp / "out", executor=one_worker, fmu_dir=rotor_fmu_dir,
+                        progress=False)
+
+
+@pytest.fixture(scope="module")
+def serial_table(serial_run):
+    return serial_run[1]
 
 
 @pytest.fixture(scope="module")
@@ -196,19 +204,12 @@ def _kill_when_rows(csv: Path, pick_pid, rows: int = 2, timeout: float = 120.0) 
     return info
 
 
-@pytest.fixture(scope="module")
-def serial_long(tmp_path_factory, rotor_fmu_dir, one_worker):
-    """12 runs of 5 s (the killed-worker tests need runs still to do after the first row)."""
-    tmp = tmp_path_factory.mktemp("serial_long")
-    scene = spinner(tmp, stop=5.0)
-    return scene, sweep(scene, VARY, tmp / "out", executor=one_worker, fmu_dir=rotor_fmu_dir,
-                        progress=False, plot=False)
-
-
-def test_killed_local_worker_loses_nothing(tmp_path, rotor_fmu_dir, serial_long):
+# The killed-worker tests kill a worker when the first row is written (polled every 20 ms): the
+# other 11 runs of 2 s (a few tenths of a second each) are still to do then.
+def test_killed_local_worker_loses_nothing(tmp_path, rotor_fmu_dir, serial_run):
     """SIGKILL of one pool worker mid-sweep (after the first row): the pool is restarted, the
     runs it lost run again, every row is there and equals the serial table."""
-    scene, serial = serial_long
+    scene, serial = serial_run
     others = {p.pid for p in multiprocessing.active_children()}  # e.g. the one_worker pool's
 
     def a_worker():
@@ -224,10 +225,10 @@ def test_killed_local_worker_loses_nothing(tmp_path, rotor_fmu_dir, serial_long)
     same_table(serial, table)
 
 
-def test_killed_dask_worker_loses_nothing(tmp_path, rotor_fmu_dir, cluster, serial_long):
+def test_killed_dask_worker_loses_nothing(tmp_path, rotor_fmu_dir, cluster, serial_run):
     """SIGKILL of one Dask worker process mid-sweep: the nanny restarts it, the scheduler
     reschedules its run; every row is there, equal to the serial table."""
-    scene, serial = serial_long
+    scene, serial = serial_run
     pids = list(cluster.run(os.getpid).values())
     info = _kill_when_rows(tmp_path / "dask" / "sweep.csv", lambda: pids[0], rows=1)
     table = sweep(scene, VARY, tmp_path / "dask", client=cluster, fmu_dir=rotor_fmu_dir,
