@@ -18,23 +18,6 @@ def fmu_dir(tmp_path_factory) -> Path:
     return dest
 
 
-@pytest.fixture(scope="session")
-def dask_client():
-    """One Dask LocalCluster of 2 worker processes on 127.0.0.1 for the session (test_sweep,
-    test_executor): starting one takes seconds. allowed-failures is 1 and worker-saturation 1.0
-    (read when the scheduler starts): a run survives one worker death, and a worker holds only
-    the run it executes (the killed-worker tests of test_sweep need both)."""
-    distributed = pytest.importorskip("distributed")
-    import dask
-    with dask.config.set({"distributed.scheduler.allowed-failures": 1,
-                          "distributed.scheduler.worker-saturation": 1.0}):
-        lc = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                      host="127.0.0.1", dashboard_address=None)
-    with lc:
-        with distributed.Client(lc) as client:
-            yield client
-
-
 @pytest.fixture
 def servo_scene():
     from crankfmu.system.load import load_scene

@@ -57,9 +57,10 @@ def test_compare_on_a_pool_equals_serial(fmu_dir, tmp_path):
         assert (tmp_path / "serial" / name).read_bytes() == (tmp_path / "pool" / name).read_bytes()
 
 
-def test_accuracy_and_compare_on_a_dask_cluster_equal_serial(fmu_dir, tmp_path, dask_client):
-    """The same two studies on a LocalCluster of 2 worker processes (127.0.0.1, the session's:
-    tests/conftest.py): the numbers and the run files equal the serial path's."""
+def test_accuracy_and_compare_on_a_dask_cluster_equal_serial(fmu_dir, tmp_path):
+    """The same two studies on a LocalCluster of 2 worker processes (127.0.0.1): the numbers
+    and the run files equal the serial path's."""
+    distributed = __import__("pytest").importorskip("distributed")
     from crankfmu.studies.accuracy import AccuracyOptions, run_accuracy
     from crankfmu.studies.compare import compare_scenes
     from crankfmu.cosim.runner import RunOptions
@@ -79,9 +80,13 @@ def test_accuracy_and_compare_on_a_dask_cluster_equal_serial(fmu_dir, tmp_path, 
     b.components["motor"].parameters["J_flywheel"] = 0.1
     run_opts = RunOptions(fmu_dir=fmu_dir, progress=False)
     serial_cmp = compare_scenes(scene(0.7), copy.deepcopy(b), tmp_path / "cmp_serial", run_opts)
-    dask = DaskExecutor(client=dask_client)
-    on_dask = run_accuracy(scene(0.1), options(tmp_path / "dask", executor=dask))
-    dask_cmp = compare_scenes(scene(0.7), copy.deepcopy(b), tmp_path / "cmp_dask", run_opts, dask)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  host="127.0.0.1", dashboard_address=None) as lc, \
+            distributed.Client(lc) as client:
+        dask = DaskExecutor(client=client)
+        on_dask = run_accuracy(scene(0.1), options(tmp_path / "dask", executor=dask))
+        dask_cmp = compare_scenes(scene(0.7), copy.deepcopy(b), tmp_path / "cmp_dask", run_opts,
+                                  dask)
     for oa, ob in zip(serial.outcomes, on_dask.outcomes):
         assert (oa.setting, oa.status, oa.error, oa.do_steps) == \
             (ob.setting, ob.status, ob.error, ob.do_steps)

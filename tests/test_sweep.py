@@ -144,7 +144,6 @@ def test_resume_after_interruption(tmp_path, rotor_fmu_dir, one_worker):
     assert resumed.executed == 7
     same_table(full, resumed)
 
-
 @pytest.fixture(scope="module")
 def serial_run(tmp_path_factory, rotor_fmu_dir, one_worker):
     """(scene, table): the 12 runs of 2 s in one worker, the table every other way of running
@@ -158,24 +157,6 @@ def serial_run(tmp_path_factory, rotor_fmu_dir, one_worker):
 @pytest.fixture(scope="module")
 def serial_table(serial_run):
     return serial_run[1]
-
-
-@pytest.fixture(scope="module")
-def cluster(dask_client):
-    """The session's LocalCluster of 2 worker processes (tests/conftest.py: allowed-failures 1,
-    worker-saturation 1.0)."""
-    return dask_client
-
-
-def test_dask_cluster_equals_serial(tmp_path, rotor_fmu_dir, serial_table, cluster):
-    """A LocalCluster of 2 worker processes on 127.0.0.1 gives the --jobs 1 table exactly, and
-    both workers took runs (they get the FMUs' bytes, not a path)."""
-    assert all(r["status"] == "completed" for r in serial_table.rows)
-    assert len(serial_table.rows) == 12
-    table = sweep(spinner(tmp_path), VARY, tmp_path / "out", client=cluster,
-                  fmu_dir=rotor_fmu_dir, progress=False)
-    same_table(serial_table, table)
-    assert (tmp_path / "out" / "sweep.png").is_file()
 
 
 def test_local_pool_equals_serial(tmp_path, rotor_fmu_dir, serial_table):
@@ -223,38 +204,6 @@ def test_killed_local_worker_loses_nothing(tmp_path, rotor_fmu_dir, serial_run):
     assert "killed" in info
     assert [r["status"] for r in table.rows] == ["completed"] * 12
     same_table(serial, table)
-
-
-def test_killed_dask_worker_loses_nothing(tmp_path, rotor_fmu_dir, cluster, serial_run):
-    """SIGKILL of one Dask worker process mid-sweep: the nanny restarts it, the scheduler
-    reschedules its run; every row is there, equal to the serial table."""
-    scene, serial = serial_run
-    pids = list(cluster.run(os.getpid).values())
-    info = _kill_when_rows(tmp_path / "dask" / "sweep.csv", lambda: pids[0], rows=1)
-    table = sweep(scene, VARY, tmp_path / "dask", client=cluster, fmu_dir=rotor_fmu_dir,
-                  progress=False, plot=False)
-    info["thread"].join(1)
-    assert info.get("killed") == pids[0]
-    assert [r["status"] for r in table.rows] == ["completed"] * 12
-    same_table(serial, table)
-
-
-def test_cli_on_a_scheduler_address(tmp_path, rotor_fmu_dir, cluster, one_worker, capsys):
-    """`crankfmu sweep --scheduler tcp://127.0.0.1:PORT` (the address, not a client object)."""
-    from crankfmu.cli import main
-
-    scene = spinner(tmp_path, stop=2.0)
-    out = tmp_path / "cli"
-    assert main(["sweep", str(scene), "--vary", "r.J=0.3,0.6", "--vary", "r.d=0.2:1.0:2",
-                 "--out", str(out), "--scheduler", cluster.scheduler.address,
-                 "--fmus", str(rotor_fmu_dir), "--no-progress"]) == 0
-    assert "4 runs (4 executed now, 0 kept" in capsys.readouterr().out
-    serial = sweep(scene, ["r.J=0.3,0.6", "r.d=0.2:1.0:2"], tmp_path / "serial",
-                   executor=one_worker, fmu_dir=rotor_fmu_dir, progress=False, plot=False)
-    header, rows = read_table(out / "sweep.csv")
-    assert header == serial.columns
-    same_rows(header, rows, serial.rows)
-    assert (out / "sweep.png").is_file()
 
 
 @pytest.fixture(scope="module")
@@ -326,16 +275,6 @@ def test_a_run_that_always_kills_its_local_worker_is_a_lost_row(tmp_path, rotor_
         in outputs[2].reason
 
 
-def test_a_run_that_always_kills_its_dask_worker_is_a_lost_row(tmp_path, rotor_fmu_dir, cluster):
-    """Dask reschedules it (allowed-failures, 1 in this cluster), then gives up: KilledWorker,
-    reported as a lost row; the other runs complete."""
-    from crankfmu.studies.executor import DaskExecutor
-    outputs = DaskExecutor(client=cluster).run(_tasks(tmp_path, victim=1), rotor_fmu_dir,
-                                               progress=False)
-    assert [o.status for o in outputs] == ["completed", "lost", "completed", "completed"]
-    assert "KilledWorker" in outputs[1].reason or "died" in outputs[1].reason
-
-
 def test_latin_hypercube_sweep(tmp_path, rotor_fmu_dir, one_worker):
     """--samples: N points, one per stratum of each range, the same on a second call (resumed)."""
     scene = spinner(tmp_path, stop=1.0)
@@ -347,3 +286,73 @@ def test_latin_hypercube_sweep(tmp_path, rotor_fmu_dir, one_worker):
     assert np.all((J >= 0.3 + 0.12 * np.arange(5)) & (J < 0.3 + 0.12 * np.arange(1, 6)))
     assert np.all((table.column("r.d") >= 0.2) & (table.column("r.d") <= 1.0))
     assert sweep(scene, ["r.J=0.3:0.9", "r.d=0.2,1.0"], tmp_path / "lhs", **kw).executed == 0
+
+
+# -- on a Dask LocalCluster: last in the module, because the cluster's scheduler runs in
+# this process until the module ends and its event loop takes this process's GIL (and ~15 % of
+# a core with its workers, measured idle) from every test after it
+@pytest.fixture(scope="module")
+def cluster():
+    distributed = pytest.importorskip("distributed")
+    import dask
+    # read at start: a run survives one worker death; a worker holds only the run it executes
+    with dask.config.set({"distributed.scheduler.allowed-failures": 1,
+                          "distributed.scheduler.worker-saturation": 1.0}):
+        lc = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                      host="127.0.0.1", dashboard_address=None)
+    with lc:
+        with distributed.Client(lc) as client:
+            yield client
+
+
+def test_dask_cluster_equals_serial(tmp_path, rotor_fmu_dir, serial_table, cluster):
+    """A LocalCluster of 2 worker processes on 127.0.0.1 gives the --jobs 1 table exactly, and
+    both workers took runs (they get the FMUs' bytes, not a path)."""
+    assert all(r["status"] == "completed" for r in serial_table.rows)
+    assert len(serial_table.rows) == 12
+    table = sweep(spinner(tmp_path), VARY, tmp_path / "out", client=cluster,
+                  fmu_dir=rotor_fmu_dir, progress=False)
+    same_table(serial_table, table)
+    assert (tmp_path / "out" / "sweep.png").is_file()
+
+
+def test_killed_dask_worker_loses_nothing(tmp_path, rotor_fmu_dir, cluster, serial_run):
+    """SIGKILL of one Dask worker process mid-sweep: the nanny restarts it, the scheduler
+    reschedules its run; every row is there, equal to the serial table."""
+    scene, serial = serial_run
+    pids = list(cluster.run(os.getpid).values())
+    info = _kill_when_rows(tmp_path / "dask" / "sweep.csv", lambda: pids[0], rows=1)
+    table = sweep(scene, VARY, tmp_path / "dask", client=cluster, fmu_dir=rotor_fmu_dir,
+                  progress=False, plot=False)
+    info["thread"].join(1)
+    assert info.get("killed") == pids[0]
+    assert [r["status"] for r in table.rows] == ["completed"] * 12
+    same_table(serial, table)
+
+
+def test_cli_on_a_scheduler_address(tmp_path, rotor_fmu_dir, cluster, one_worker, capsys):
+    """`crankfmu sweep --scheduler tcp://127.0.0.1:PORT` (the address, not a client object)."""
+    from crankfmu.cli import main
+
+    scene = spinner(tmp_path, stop=2.0)
+    out = tmp_path / "cli"
+    assert main(["sweep", str(scene), "--vary", "r.J=0.3,0.6", "--vary", "r.d=0.2:1.0:2",
+                 "--out", str(out), "--scheduler", cluster.scheduler.address,
+                 "--fmus", str(rotor_fmu_dir), "--no-progress"]) == 0
+    assert "4 runs (4 executed now, 0 kept" in capsys.readouterr().out
+    serial = sweep(scene, ["r.J=0.3,0.6", "r.d=0.2:1.0:2"], tmp_path / "serial",
+                   executor=one_worker, fmu_dir=rotor_fmu_dir, progress=False, plot=False)
+    header, rows = read_table(out / "sweep.csv")
+    assert header == serial.columns
+    same_rows(header, rows, serial.rows)
+    assert (out / "sweep.png").is_file()
+
+
+def test_a_run_that_always_kills_its_dask_worker_is_a_lost_row(tmp_path, rotor_fmu_dir, cluster):
+    """Dask reschedules it (allowed-failures, 1 in this cluster), then gives up: KilledWorker,
+    reported as a lost row; the other runs complete."""
+    from crankfmu.studies.executor import DaskExecutor
+    outputs = DaskExecutor(client=cluster).run(_tasks(tmp_path, victim=1), rotor_fmu_dir,
+                                               progress=False)
+    assert [o.status for o in outputs] == ["completed", "lost", "completed", "completed"]
+    assert "KilledWorker" in outputs[1].reason or "died" in outputs[1].reason
