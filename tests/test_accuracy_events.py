@@ -19,12 +19,8 @@ from crankfmu.system.load import load_scene
 
 
 @pytest.fixture(scope="module")
-def hybrid_fmus(tmp_path_factory):
-    from crankfmu.fmu.build import build_all
-    dest = tmp_path_factory.mktemp("hybrid_fmus")
-    build_all(dest, ["InductionMotor", "PlanetaryClutchDrive", "DcServoMotor",
-                     "CrankRockerHammer"])
-    return dest
+def hybrid_fmus(fmu_dir):
+    return fmu_dir  # the session's catalog (tests/conftest.py)
 
 
 @pytest.fixture(scope="module")

@@ -26,12 +26,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
-def rotor_fmu_dir(tmp_path_factory):
-    from crankfmu.fmu.build import build_all
-
-    dest = tmp_path_factory.mktemp("sweep_fmus")
-    build_all(dest, ["Rotor"])
-    return dest
+def rotor_fmu_dir(fmu_dir):
+    return fmu_dir  # the session's catalog (tests/conftest.py)
 
 
 @pytest.fixture(scope="module")
@@ -207,11 +203,8 @@ def test_killed_local_worker_loses_nothing(tmp_path, rotor_fmu_dir, serial_run):
 
 
 @pytest.fixture(scope="module")
-def hybrid_fmus(tmp_path_factory):
-    from crankfmu.fmu.build import build_all
-    dest = tmp_path_factory.mktemp("hybrid_fmus")
-    build_all(dest, ["DcServoMotor", "StephensonPress", "InductionMotor", "PlanetaryClutchDrive"])
-    return dest
+def hybrid_fmus(fmu_dir):
+    return fmu_dir  # the session's catalog (tests/conftest.py)
 
 
 def test_hybrid_scene_reports_its_event_figures(tmp_path, hybrid_fmus, one_worker):
