@@ -9,13 +9,48 @@ ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"
 
 
+def pytest_sessionstart(session) -> None:
+    """With pytest-xdist (pyproject.toml's addopts: one worker process per core, whole test files
+    per worker), the controller brings the repository's fmus/ up to date before the workers
+    start. Scenes run without --fmus build their FMUs there on first use, and the build writes
+    the file in place: two workers meeting a missing FMU at once would build it together while
+    one of them reads it. Serially nothing changes: the first test that needs an FMU builds it."""
+    config = session.config
+    if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
+        return
+    from fmpy import read_model_description
+
+    from crankfmu.fmu.build import build_fmu, current_build_id
+    from crankfmu.models.catalog import FMU_MODELS
+
+    for model in FMU_MODELS:
+        path = ROOT / "fmus" / f"{model}.fmu"
+        try:
+            current = read_model_description(str(path)).version
+        except Exception:  # missing or unreadable: built, as resolve_fmu would
+            current = None
+        if current != current_build_id(model):
+            build_fmu(model, ROOT / "fmus")
+
+
 @pytest.fixture(scope="session")
 def fmu_dir(tmp_path_factory) -> Path:
+    """Every FMU of the catalog, built once for the session and checked with fmpy validate
+    (2 s; the test modules used to build their own, 17 builds of up to 9 FMUs). Tests only read
+    these files: a test that needs other builds makes them in its own folder."""
     from crankfmu.fmu.build import build_all
 
     dest = tmp_path_factory.mktemp("fmus")
-    build_all(dest, ["DcServoMotor", "StephensonPress"])
+    build_all(dest)
     return dest
+
+
+@pytest.fixture(scope="session")
+def catalog(fmu_dir) -> dict[str, Path]:
+    """model name -> the session's FMU file (new models are picked up automatically)."""
+    from crankfmu.models.catalog import FMU_MODELS
+
+    return {model: fmu_dir / f"{model}.fmu" for model in FMU_MODELS}
 
 
 @pytest.fixture

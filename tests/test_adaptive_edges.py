@@ -67,11 +67,8 @@ def test_a_step_across_an_edge_ends_on_it(edge):
 
 
 @pytest.fixture(scope="module")
-def fmus(tmp_path_factory):
-    from crankfmu.fmu.build import build_all
-    dest = tmp_path_factory.mktemp("adaptive_edges_fmus")
-    build_all(dest, ["InductionMotor", "PlanetaryClutchDrive", "CrankRockerHammer"])
-    return dest
+def fmus(fmu_dir):
+    return fmu_dir  # the session's catalog (tests/conftest.py)
 
 
 def test_adaptive_clutch_hammer_locks_the_ring_as_the_reference(fmus):

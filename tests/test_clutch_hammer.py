@@ -35,11 +35,8 @@ BALANCE_TOL, REFERENCE_BALANCE_TOL = 1e-3, 1e-8
 
 
 @pytest.fixture(scope="module")
-def fmus(tmp_path_factory):
-    from crankfmu.fmu.build import build_all
-    dest = tmp_path_factory.mktemp("clutch_hammer_fmus")
-    build_all(dest, ["InductionMotor", "PlanetaryClutchDrive", "CrankRockerHammer"])
-    return dest
+def fmus(fmu_dir):
+    return fmu_dir  # the session's catalog (tests/conftest.py)
 
 
 def run(fmus, tmp_path_factory, h):

@@ -44,10 +44,8 @@ def run(fmus, tmp_path_factory, h):
 
 
 @pytest.fixture(scope="module")
-def runs(tmp_path_factory):
-    from crankfmu.fmu.build import build_all
-    fmus = tmp_path_factory.mktemp("clutch_stand_fmus")
-    build_all(fmus, ["InductionMotor", "PlanetaryClutchDrive", "MillStandDrive"])
+def runs(tmp_path_factory, fmu_dir):
+    fmus = fmu_dir
     sc = load_scene(SCENE)
     assert sc.master.step == 1e-3 and sc.master.algorithm == "gauss-seidel"
     return {h: run(fmus, tmp_path_factory, h) for h in (1e-3, 5e-4)}

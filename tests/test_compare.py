@@ -97,11 +97,8 @@ def test_metrics_known_answers():
 
 # -- the README example, short ------------------------------------------------------------------
 @pytest.fixture(scope="module")
-def fmus(tmp_path_factory):
-    from crankfmu.fmu.build import build_all
-    dest = tmp_path_factory.mktemp("compare_fmus")
-    build_all(dest, ["DcServoMotor", "StephensonPress", "InductionMotor", "PlanetaryClutchDrive"])
-    return dest
+def fmus(fmu_dir):
+    return fmu_dir  # the session's catalog (tests/conftest.py)
 
 
 def test_compare_command_servo_vs_conventional(fmus, tmp_path, capsys):

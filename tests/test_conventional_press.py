@@ -32,11 +32,8 @@ EVENTS = ("t_slip_h", "t_lock_b", "t_slip_b", "t_lock_h")
 
 
 @pytest.fixture(scope="module")
-def fmus(tmp_path_factory):
-    from crankfmu.fmu.build import build_all
-    dest = tmp_path_factory.mktemp("conventional_fmus")
-    build_all(dest, ["InductionMotor", "PlanetaryClutchDrive", "StephensonPress"])
-    return dest
+def fmus(fmu_dir):
+    return fmu_dir  # the session's catalog (tests/conftest.py)
 
 
 @pytest.fixture(scope="module")

@@ -1,5 +1,8 @@
 """`accuracy` and `compare` through the executor: a local pool of 2 gives the serial path's
-numbers and files exactly (wall times aside)."""
+numbers and files exactly (wall times aside). The accuracy studies run without the error
+estimate's companion runs (estimate=False): they are more runs of the same kind, cost more than
+the runs compared (half the step), and the estimates are not compared here
+(tests/test_error_estimate.py checks them)."""
 from __future__ import annotations
 
 import copy
@@ -22,7 +25,7 @@ def test_accuracy_on_a_pool_equals_serial(fmu_dir, tmp_path):
         results[jobs] = run_accuracy(scene, AccuracyOptions(
             out_dir=tmp_path / f"j{jobs}", algorithms=["gauss-seidel", "jacobi"],
             extrapolations=[0, 2], steps=[2e-3, 1e-3], fmu_dir=fmu_dir, progress=False,
-            jobs=jobs))
+            jobs=jobs, estimate=False))
     a, b = results[1].outcomes, results[2].outcomes
     assert len(a) == len(b) == 8
     for oa, ob in zip(a, b):
@@ -73,7 +76,8 @@ def test_accuracy_and_compare_on_a_dask_cluster_equal_serial(fmu_dir, tmp_path):
 
     def options(out, **kw):
         return AccuracyOptions(out_dir=out, algorithms=["gauss-seidel"], extrapolations=[0, 1],
-                               steps=[2e-3, 1e-3], fmu_dir=fmu_dir, progress=False, **kw)
+                               steps=[2e-3, 1e-3], fmu_dir=fmu_dir, progress=False,
+                               estimate=False, **kw)
     serial = run_accuracy(scene(0.1), options(tmp_path / "serial", jobs=1))
     b = scene(0.7)
     b.name = "with_flywheel"

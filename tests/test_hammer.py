@@ -23,12 +23,8 @@ S_P = RockerData().S_percussion
 
 
 @pytest.fixture(scope="module")
-def fmus(tmp_path_factory) -> Path:
-    from crankfmu.fmu.build import build_all
-
-    dest = tmp_path_factory.mktemp("hammer_fmus")
-    build_all(dest, ["DcServoMotor", "RockerImpact", "CrankRockerHammer"])
-    return dest
+def fmus(fmu_dir) -> Path:
+    return fmu_dir  # the session's catalog (tests/conftest.py)
 
 
 def run(fmus, tmp_path, name, *overrides, stop_time=None, step=None):

@@ -57,13 +57,9 @@ variables = ["r1.flange_w", "r2.w", "r1.E"]
 """
 
 
-@pytest.fixture(scope="session")
-def rotors(tmp_path_factory) -> Path:
-    from crankfmu.fmu.build import build_all
-
-    dest = tmp_path_factory.mktemp("hostile_rotor_fmus")
-    build_all(dest, ["Rotor", "ShaftRotor"])
-    return dest
+@pytest.fixture(scope="module")
+def rotors(fmu_dir) -> Path:
+    return fmu_dir  # the session's catalog (tests/conftest.py)
 
 
 def write(tmp_path, text, name="scene.toml") -> Path:

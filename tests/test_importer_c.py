@@ -28,7 +28,7 @@ import pytest
 from fmpy import extract, read_model_description
 
 from crankfmu.models.catalog import FMU_MODELS
-from tests.support.importer_support import build_catalog, real_outputs, step_in_process
+from tests.support.importer_support import real_outputs, step_in_process
 
 HOST_SOURCE = Path(__file__).resolve().parent / "c_host" / "host.c"
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
@@ -67,11 +67,6 @@ def host(tmp_path_factory) -> Path:
     done = subprocess.run(cmd, capture_output=True, text=True)
     assert done.returncode == 0, f"{' '.join(cmd)}\n{done.stderr}"
     return exe
-
-
-@pytest.fixture(scope="module")
-def catalog(tmp_path_factory) -> dict[str, Path]:
-    return build_catalog(tmp_path_factory.mktemp("fmus_c"))
 
 
 def fmu_line(name: str, fmu: Path, unzip_root: Path) -> str:

@@ -22,14 +22,9 @@ from fmpy import read_model_description, simulate_fmu
 from crankfmu.runtime.model import held
 from crankfmu.models.catalog import FMU_MODELS, physics_class
 from crankfmu.runtime.slave import DEFAULT_TOLERANCE
-from tests.support.importer_support import build_catalog, real_outputs
+from tests.support.importer_support import real_outputs
 
 RUN_STEPS = 300  # steps run and compared (0.3 s at the default 1 ms)
-
-
-@pytest.fixture(scope="module")
-def catalog(tmp_path_factory):
-    return build_catalog(tmp_path_factory.mktemp("fmus_fmpy"))
 
 
 @pytest.fixture(scope="module")

@@ -33,13 +33,9 @@ OSCILLATOR = dict(J1=1.0, c1=10.0, d1=0.0, J2=0.5, k=100.0, ds=0.5, c2=0.0, d2=0
 STEPS = (1e-2, 5e-3, 2.5e-3)  # s; the record grid 1e-2 s is common to all three
 
 
-@pytest.fixture(scope="session")
-def rotor_fmus(tmp_path_factory):
-    from crankfmu.fmu.build import build_all
-
-    dest = tmp_path_factory.mktemp("rotor_fmus")
-    build_all(dest, ["Rotor", "ShaftRotor"])
-    return dest
+@pytest.fixture(scope="module")
+def rotor_fmus(fmu_dir):
+    return fmu_dir  # the session's catalog (tests/conftest.py)
 
 
 def scene_file(tmp_path, master: dict, p: dict, stop: float, record: float | None):

@@ -21,12 +21,8 @@ TWO_PI = 2.0 * math.pi
 
 
 @pytest.fixture(scope="module")
-def fmus(tmp_path_factory) -> Path:
-    from crankfmu.fmu.build import build_all
-
-    dest = tmp_path_factory.mktemp("mill_fmus")
-    build_all(dest, ["DcServoMotor", "MillStandDrive"])
-    return dest
+def fmus(fmu_dir) -> Path:
+    return fmu_dir  # the session's catalog (tests/conftest.py)
 
 
 def last_cycle(rec, scene):

@@ -22,7 +22,7 @@ from fmpy import read_model_description
 
 from crankfmu.fmu import build
 from crankfmu.models.catalog import FMU_MODELS
-from tests.support.importer_support import build_catalog, step_in_process, step_together
+from tests.support.importer_support import step_in_process, step_together
 
 TESTS = Path(__file__).resolve().parent
 H, N_STEPS, RTOL = 1e-3, 100, 1e-8
@@ -41,11 +41,6 @@ def _marked_output_values(self, t, x, u):
 
 DcServoMotor.output_values = _marked_output_values
 '''
-
-
-@pytest.fixture(scope="module")
-def catalog(tmp_path_factory) -> dict[str, Path]:
-    return build_catalog(tmp_path_factory.mktemp("fmus_mix"))
 
 
 def build_from_copy(tmp: Path, dest: Path, build_id: str | None = None) -> Path:

@@ -21,16 +21,21 @@ PLANETARY_SCENE = ROOT / "scenarios" / "planetary_engagement.toml"
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 
+# the real ones (the command tests patch the module)
+_DYNAMIC_ERROR_DATA, _FLYWHEEL_DATA = papers.dynamic_error_data, papers.flywheel_data
+_IMPACT_DATA = papers.impact_data
+
+
 @functools.lru_cache(maxsize=None)
 def press_data():
     press, m_static, m_lag, u0 = papers.press_models(load_scene(PRESS_SCENE))
-    return (papers.dynamic_error_data(press, m_static, m_lag, u0),
-            papers.flywheel_data(press, m_static, u0))
+    return (_DYNAMIC_ERROR_DATA(press, m_static, m_lag, u0),
+            _FLYWHEEL_DATA(press, m_static, u0))
 
 
 @functools.lru_cache(maxsize=None)
 def impact_data():
-    return papers.impact_data(IMPACT_SCENE)
+    return _IMPACT_DATA(IMPACT_SCENE)
 
 
 _PLANETARY_DATA = papers.planetary_data   # the real one (the command test patches the module)
@@ -48,14 +53,19 @@ def assert_pngs(directory: Path, names) -> None:
 
 
 # -- the commands -----------------------------------------------------------------------------
-def test_analyze_press_writes_its_figures(tmp_path, capsys):
+def test_analyze_press_writes_its_figures(tmp_path, capsys, monkeypatch):
+    # the curves from the cached data (the command's own computation is the same calls, on the
+    # same scene); the base link's figure is computed by the command
+    monkeypatch.setattr(papers, "dynamic_error_data", lambda *args: press_data()[0])
+    monkeypatch.setattr(papers, "flywheel_data", lambda *args: press_data()[1])
     out = tmp_path / "figs" / "press"   # created, parents too
     assert main(["analyze", "press", "--plot", str(out), "--scene", str(PRESS_SCENE)]) == 0
     assert_pngs(out, ["press_dynamic_error.png", "press_base_link.png", "press_flywheel.png"])
     assert capsys.readouterr().out.count("wrote ") == 3
 
 
-def test_analyze_impact_keeps_its_table_and_writes_the_figure(tmp_path, capsys):
+def test_analyze_impact_keeps_its_table_and_writes_the_figure(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(papers, "impact_data", lambda scene: impact_data())  # the same call
     assert main(["analyze", "impact", "--k-n", "80e6", "--S-factor", "1.1", "--plot",
                  str(tmp_path), "--scene", str(IMPACT_SCENE)]) == 0
     out = capsys.readouterr().out

@@ -43,11 +43,8 @@ SCENES = {"engage": "planetary_engagement.toml", "stop": "planetary_stopping.tom
 
 
 @pytest.fixture(scope="module")
-def fmus(tmp_path_factory):
-    from crankfmu.fmu.build import build_all
-    dest = tmp_path_factory.mktemp("planetary_fmus")
-    build_all(dest, ["InductionMotor", "PlanetaryClutchDrive"])
-    return dest
+def fmus(fmu_dir):
+    return fmu_dir  # the session's catalog (tests/conftest.py)
 
 
 def scene_parameters(scene):

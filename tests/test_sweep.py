@@ -26,12 +26,17 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
-def rotor_fmu_dir(tmp_path_factory):
-    from crankfmu.fmu.build import build_all
+def rotor_fmu_dir(fmu_dir):
+    return fmu_dir  # the session's catalog (tests/conftest.py)
 
-    dest = tmp_path_factory.mktemp("sweep_fmus")
-    build_all(dest, ["Rotor"])
-    return dest
+
+@pytest.fixture(scope="module")
+def one_worker():
+    """The executor `jobs=1` makes (a local pool of one spawned worker), kept for the module:
+    its runs are those of jobs=1, without starting a fresh interpreter for every sweep."""
+    from crankfmu.studies.executor import LocalPoolExecutor
+    with LocalPoolExecutor(1) as pool:
+        yield pool
 
 
 def spinner(tmp_path: Path, stop: float = 2.0) -> Path:
@@ -98,12 +103,13 @@ def test_vary_and_grid():
             parse_vary(bad)
 
 
-def test_failed_run_is_a_row_and_the_sweep_resumes(tmp_path, fmu_dir, capsys):
+def test_failed_run_is_a_row_and_the_sweep_resumes(tmp_path, fmu_dir, one_worker):
     """press.l = 0.04 < r = 0.05 cannot assemble: that row says refused (the runner checks the
     parameters with the physics before any FMU starts) with the press's reason, the other rows
     are complete; a second call runs nothing and gives the same table."""
     out = tmp_path / "sweep"
-    kw = dict(stop_time=0.05, from_time=0.0, jobs=1, fmu_dir=fmu_dir, progress=False)
+    kw = dict(stop_time=0.05, from_time=0.0, executor=one_worker, fmu_dir=fmu_dir,
+              progress=False)
     table = sweep(ROOT / "scenarios/servo_press.toml", ["press.l=0.25,0.04,0.3"], out, **kw)
     status = [r["status"] for r in table.rows]
     assert status == ["completed", "refused", "completed"]
@@ -121,47 +127,32 @@ def test_failed_run_is_a_row_and_the_sweep_resumes(tmp_path, fmu_dir, capsys):
         sweep(ROOT / "scenarios/servo_press.toml", ["press.l=0.25,0.3"], out, **kw)
 
 
-def test_resume_after_interruption(tmp_path, rotor_fmu_dir):
+def test_resume_after_interruption(tmp_path, rotor_fmu_dir, one_worker):
     """Rows already in sweep.csv (an interrupted sweep) are kept; only the others run."""
     scene = spinner(tmp_path, stop=1.0)
     out = tmp_path / "s"
-    full = sweep(scene, VARY, out, jobs=1, fmu_dir=rotor_fmu_dir, progress=False, plot=False)
+    full = sweep(scene, VARY, out, executor=one_worker, fmu_dir=rotor_fmu_dir, progress=False,
+                 plot=False)
     lines = (out / "sweep.csv").read_text().splitlines()
     (out / "sweep.csv").write_text("\n".join(lines[:6]) + "\n" + lines[6][:10])  # 5 rows + a cut one
-    resumed = sweep(scene, VARY, out, jobs=1, fmu_dir=rotor_fmu_dir, progress=False, plot=False)
+    resumed = sweep(scene, VARY, out, executor=one_worker, fmu_dir=rotor_fmu_dir,
+                    progress=False, plot=False)
     assert resumed.executed == 7
     same_table(full, resumed)
 
-
 @pytest.fixture(scope="module")
-def serial_table(tmp_path_factory, rotor_fmu_dir):
+def serial_run(tmp_path_factory, rotor_fmu_dir, one_worker):
+    """(scene, table): the 12 runs of 2 s in one worker, the table every other way of running
+    them must give."""
     tmp = tmp_path_factory.mktemp("serial")
-    return sweep(spinner(tmp), VARY, tmp / "out", jobs=1, fmu_dir=rotor_fmu_dir, progress=False)
+    scene = spinner(tmp)
+    return scene, sweep(scene, VARY, tmp / "out", executor=one_worker, fmu_dir=rotor_fmu_dir,
+                        progress=False)
 
 
 @pytest.fixture(scope="module")
-def cluster():
-    distributed = pytest.importorskip("distributed")
-    import dask
-    # read at start: a run survives one worker death; a worker holds only the run it executes
-    with dask.config.set({"distributed.scheduler.allowed-failures": 1,
-                          "distributed.scheduler.worker-saturation": 1.0}):
-        lc = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                      host="127.0.0.1", dashboard_address=None)
-    with lc:
-        with distributed.Client(lc) as client:
-            yield client
-
-
-def test_dask_cluster_equals_serial(tmp_path, rotor_fmu_dir, serial_table, cluster):
-    """A LocalCluster of 2 worker processes on 127.0.0.1 gives the --jobs 1 table exactly, and
-    both workers took runs (they get the FMUs' bytes, not a path)."""
-    assert all(r["status"] == "completed" for r in serial_table.rows)
-    assert len(serial_table.rows) == 12
-    table = sweep(spinner(tmp_path), VARY, tmp_path / "out", client=cluster,
-                  fmu_dir=rotor_fmu_dir, progress=False)
-    same_table(serial_table, table)
-    assert (tmp_path / "out" / "sweep.png").is_file()
+def serial_table(serial_run):
+    return serial_run[1]
 
 
 def test_local_pool_equals_serial(tmp_path, rotor_fmu_dir, serial_table):
@@ -190,22 +181,17 @@ def _kill_when_rows(csv: Path, pick_pid, rows: int = 2, timeout: float = 120.0) 
     return info
 
 
-@pytest.fixture(scope="module")
-def serial_long(tmp_path_factory, rotor_fmu_dir):
-    """12 runs of 5 s (the killed-worker tests need runs still to do after the first row)."""
-    tmp = tmp_path_factory.mktemp("serial_long")
-    scene = spinner(tmp, stop=5.0)
-    return scene, sweep(scene, VARY, tmp / "out", jobs=1, fmu_dir=rotor_fmu_dir,
-                        progress=False, plot=False)
-
-
-def test_killed_local_worker_loses_nothing(tmp_path, rotor_fmu_dir, serial_long):
+# The killed-worker tests kill a worker when the first row is written (polled every 20 ms): the
+# other 11 runs of 2 s (a few tenths of a second each) are still to do then.
+def test_killed_local_worker_loses_nothing(tmp_path, rotor_fmu_dir, serial_run):
     """SIGKILL of one pool worker mid-sweep (after the first row): the pool is restarted, the
     runs it lost run again, every row is there and equals the serial table."""
-    scene, serial = serial_long
+    scene, serial = serial_run
+    others = {p.pid for p in multiprocessing.active_children()}  # e.g. the one_worker pool's
 
     def a_worker():
-        kids = [p for p in multiprocessing.active_children() if p.name.startswith("SpawnProcess")]
+        kids = [p for p in multiprocessing.active_children()
+                if p.name.startswith("SpawnProcess") and p.pid not in others]
         return kids[0].pid if kids else None
     info = _kill_when_rows(tmp_path / "pool" / "sweep.csv", a_worker, rows=1)
     table = sweep(scene, VARY, tmp_path / "pool", jobs=2, fmu_dir=rotor_fmu_dir,
@@ -216,52 +202,17 @@ def test_killed_local_worker_loses_nothing(tmp_path, rotor_fmu_dir, serial_long)
     same_table(serial, table)
 
 
-def test_killed_dask_worker_loses_nothing(tmp_path, rotor_fmu_dir, cluster, serial_long):
-    """SIGKILL of one Dask worker process mid-sweep: the nanny restarts it, the scheduler
-    reschedules its run; every row is there, equal to the serial table."""
-    scene, serial = serial_long
-    pids = list(cluster.run(os.getpid).values())
-    info = _kill_when_rows(tmp_path / "dask" / "sweep.csv", lambda: pids[0], rows=1)
-    table = sweep(scene, VARY, tmp_path / "dask", client=cluster, fmu_dir=rotor_fmu_dir,
-                  progress=False, plot=False)
-    info["thread"].join(1)
-    assert info.get("killed") == pids[0]
-    assert [r["status"] for r in table.rows] == ["completed"] * 12
-    same_table(serial, table)
-
-
-def test_cli_on_a_scheduler_address(tmp_path, rotor_fmu_dir, cluster, capsys):
-    """`crankfmu sweep --scheduler tcp://127.0.0.1:PORT` (the address, not a client object)."""
-    from crankfmu.cli import main
-
-    scene = spinner(tmp_path, stop=2.0)
-    out = tmp_path / "cli"
-    assert main(["sweep", str(scene), "--vary", "r.J=0.3,0.6", "--vary", "r.d=0.2:1.0:2",
-                 "--out", str(out), "--scheduler", cluster.scheduler.address,
-                 "--fmus", str(rotor_fmu_dir), "--no-progress"]) == 0
-    assert "4 runs (4 executed now, 0 kept" in capsys.readouterr().out
-    serial = sweep(scene, ["r.J=0.3,0.6", "r.d=0.2:1.0:2"], tmp_path / "serial", jobs=1,
-                   fmu_dir=rotor_fmu_dir, progress=False, plot=False)
-    header, rows = read_table(out / "sweep.csv")
-    assert header == serial.columns
-    same_rows(header, rows, serial.rows)
-    assert (out / "sweep.png").is_file()
-
-
 @pytest.fixture(scope="module")
-def hybrid_fmus(tmp_path_factory):
-    from crankfmu.fmu.build import build_all
-    dest = tmp_path_factory.mktemp("hybrid_fmus")
-    build_all(dest, ["DcServoMotor", "StephensonPress", "InductionMotor", "PlanetaryClutchDrive"])
-    return dest
+def hybrid_fmus(fmu_dir):
+    return fmu_dir  # the session's catalog (tests/conftest.py)
 
 
-def test_hybrid_scene_reports_its_event_figures(tmp_path, hybrid_fmus):
+def test_hybrid_scene_reports_its_event_figures(tmp_path, hybrid_fmus, one_worker):
     """The conventional press ([analysis].events): brake energies and the number of mode events
     at the run's end are columns; a stronger ring brake engages faster and dissipates less."""
     table = sweep(ROOT / "scenarios/conventional_press.toml", ["drive.Mp_b=800,1200"],
-                  tmp_path / "out", stop_time=0.6, jobs=1, fmu_dir=hybrid_fmus, progress=False,
-                  plot=False)
+                  tmp_path / "out", stop_time=0.6, executor=one_worker, fmu_dir=hybrid_fmus,
+                  progress=False, plot=False)
     for name in ("drive.E_brake_b", "drive.E_brake_h", "drive.n_events"):
         assert name in table.columns
     assert [r["status"] for r in table.rows] == ["completed", "completed"]
@@ -317,6 +268,79 @@ def test_a_run_that_always_kills_its_local_worker_is_a_lost_row(tmp_path, rotor_
         in outputs[2].reason
 
 
+def test_latin_hypercube_sweep(tmp_path, rotor_fmu_dir, one_worker):
+    """--samples: N points, one per stratum of each range, the same on a second call (resumed)."""
+    scene = spinner(tmp_path, stop=1.0)
+    kw = dict(samples=5, seed=1, executor=one_worker, fmu_dir=rotor_fmu_dir, progress=False,
+              plot=False)
+    table = sweep(scene, ["r.J=0.3:0.9", "r.d=0.2,1.0"], tmp_path / "lhs", **kw)
+    assert len(table) == 5 and all(r["status"] == "completed" for r in table.rows)
+    J = np.sort(table.column("r.J"))
+    assert np.all((J >= 0.3 + 0.12 * np.arange(5)) & (J < 0.3 + 0.12 * np.arange(1, 6)))
+    assert np.all((table.column("r.d") >= 0.2) & (table.column("r.d") <= 1.0))
+    assert sweep(scene, ["r.J=0.3:0.9", "r.d=0.2,1.0"], tmp_path / "lhs", **kw).executed == 0
+
+
+# -- on a Dask LocalCluster: last in the module, because the cluster's scheduler runs in
+# this process until the module ends and its event loop takes this process's GIL (and ~15 % of
+# a core with its workers, measured idle) from every test after it
+@pytest.fixture(scope="module")
+def cluster():
+    distributed = pytest.importorskip("distributed")
+    import dask
+    # read at start: a run survives one worker death; a worker holds only the run it executes
+    with dask.config.set({"distributed.scheduler.allowed-failures": 1,
+                          "distributed.scheduler.worker-saturation": 1.0}):
+        lc = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                      host="127.0.0.1", dashboard_address=None)
+    with lc:
+        with distributed.Client(lc) as client:
+            yield client
+
+
+def test_dask_cluster_equals_serial(tmp_path, rotor_fmu_dir, serial_table, cluster):
+    """A LocalCluster of 2 worker processes on 127.0.0.1 gives the --jobs 1 table exactly, and
+    both workers took runs (they get the FMUs' bytes, not a path)."""
+    assert all(r["status"] == "completed" for r in serial_table.rows)
+    assert len(serial_table.rows) == 12
+    table = sweep(spinner(tmp_path), VARY, tmp_path / "out", client=cluster,
+                  fmu_dir=rotor_fmu_dir, progress=False)
+    same_table(serial_table, table)
+    assert (tmp_path / "out" / "sweep.png").is_file()
+
+
+def test_killed_dask_worker_loses_nothing(tmp_path, rotor_fmu_dir, cluster, serial_run):
+    """SIGKILL of one Dask worker process mid-sweep: the nanny restarts it, the scheduler
+    reschedules its run; every row is there, equal to the serial table."""
+    scene, serial = serial_run
+    pids = list(cluster.run(os.getpid).values())
+    info = _kill_when_rows(tmp_path / "dask" / "sweep.csv", lambda: pids[0], rows=1)
+    table = sweep(scene, VARY, tmp_path / "dask", client=cluster, fmu_dir=rotor_fmu_dir,
+                  progress=False, plot=False)
+    info["thread"].join(1)
+    assert info.get("killed") == pids[0]
+    assert [r["status"] for r in table.rows] == ["completed"] * 12
+    same_table(serial, table)
+
+
+def test_cli_on_a_scheduler_address(tmp_path, rotor_fmu_dir, cluster, one_worker, capsys):
+    """`crankfmu sweep --scheduler tcp://127.0.0.1:PORT` (the address, not a client object)."""
+    from crankfmu.cli import main
+
+    scene = spinner(tmp_path, stop=2.0)
+    out = tmp_path / "cli"
+    assert main(["sweep", str(scene), "--vary", "r.J=0.3,0.6", "--vary", "r.d=0.2:1.0:2",
+                 "--out", str(out), "--scheduler", cluster.scheduler.address,
+                 "--fmus", str(rotor_fmu_dir), "--no-progress"]) == 0
+    assert "4 runs (4 executed now, 0 kept" in capsys.readouterr().out
+    serial = sweep(scene, ["r.J=0.3,0.6", "r.d=0.2:1.0:2"], tmp_path / "serial",
+                   executor=one_worker, fmu_dir=rotor_fmu_dir, progress=False, plot=False)
+    header, rows = read_table(out / "sweep.csv")
+    assert header == serial.columns
+    same_rows(header, rows, serial.rows)
+    assert (out / "sweep.png").is_file()
+
+
 def test_a_run_that_always_kills_its_dask_worker_is_a_lost_row(tmp_path, rotor_fmu_dir, cluster):
     """Dask reschedules it (allowed-failures, 1 in this cluster), then gives up: KilledWorker,
     reported as a lost row; the other runs complete."""
@@ -325,15 +349,3 @@ def test_a_run_that_always_kills_its_dask_worker_is_a_lost_row(tmp_path, rotor_f
                                                progress=False)
     assert [o.status for o in outputs] == ["completed", "lost", "completed", "completed"]
     assert "KilledWorker" in outputs[1].reason or "died" in outputs[1].reason
-
-
-def test_latin_hypercube_sweep(tmp_path, rotor_fmu_dir):
-    """--samples: N points, one per stratum of each range, the same on a second call (resumed)."""
-    scene = spinner(tmp_path, stop=1.0)
-    kw = dict(samples=5, seed=1, jobs=1, fmu_dir=rotor_fmu_dir, progress=False, plot=False)
-    table = sweep(scene, ["r.J=0.3:0.9", "r.d=0.2,1.0"], tmp_path / "lhs", **kw)
-    assert len(table) == 5 and all(r["status"] == "completed" for r in table.rows)
-    J = np.sort(table.column("r.J"))
-    assert np.all((J >= 0.3 + 0.12 * np.arange(5)) & (J < 0.3 + 0.12 * np.arange(1, 6)))
-    assert np.all((table.column("r.d") >= 0.2) & (table.column("r.d") <= 1.0))
-    assert sweep(scene, ["r.J=0.3:0.9", "r.d=0.2,1.0"], tmp_path / "lhs", **kw).executed == 0

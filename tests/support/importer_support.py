@@ -1,4 +1,4 @@
-"""Helpers shared by the importer tests (fmpy, C host, mixing, ecos, SSP): build the catalog,
+"""Helpers shared by the importer tests (fmpy, C host, mixing, ecos, SSP): the catalog,
 step an FMU, load ecospy."""
 from __future__ import annotations
 
@@ -25,14 +25,9 @@ IMPORTER_STOP = 0.2  # s: 200 Jacobi steps of 1 ms, through the start-up transie
 
 
 @pytest.fixture(scope="module")
-def catalog_fmus(tmp_path_factory) -> Path:
-    """Every FMU of the catalog, built once per test module (import it into the module)."""
-    from crankfmu.fmu.build import build_all
-    from crankfmu.models.catalog import FMU_MODELS
-
-    dest = tmp_path_factory.mktemp("catalog_fmus")
-    build_all(dest, list(FMU_MODELS), check=False)
-    return dest
+def catalog_fmus(fmu_dir) -> Path:
+    """Every FMU of the catalog: the session's (tests/conftest.py; import it into the module)."""
+    return fmu_dir
 
 
 @pytest.fixture(scope="module")
@@ -51,14 +46,6 @@ def relative_deviation(a: np.ndarray, b: np.ndarray) -> float:
     """max |a - b| over the run, relative to max |b| (pointwise relative error is meaningless
     where a signal crosses zero)."""
     return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300))
-
-
-def build_catalog(dest: Path) -> dict[str, Path]:
-    """Every FMU of the catalog built into `dest` (new models are picked up automatically)."""
-    from crankfmu.fmu.build import build_all
-    from crankfmu.models.catalog import FMU_MODELS
-
-    return dict(zip(FMU_MODELS, build_all(dest, list(FMU_MODELS))))
 
 
 def real_outputs(model_description) -> list:
