@@ -14,9 +14,9 @@ estimate then costs the slower of the two in wall time instead of their sum.
     submit(run, *args) -> Pending; Pending.result() -> run(*args), a CompanionRun
                           (run: a module-level function, cosim.runner.run_companion)
 
-Measured (benchmarks/estimate_cost.py, README "What it costs"): a worker takes 0.5-0.8 s to
-start and needs a free core; on a 2-core machine with one core busy it paid only on runs of
-several seconds, so the command line's default is 1.
+Measured (benchmarks/estimate_cost.py, benchmarks/target.py; README "What it costs"): a worker
+takes about 0.35 s to start and needs a free core; it pays on runs of a second or more and
+costs more on shorter ones or when the cores are busy, so the command line's default is 1.
 
 A run's numbers are a function of its scene and the FMU files only, so a companion gives the same
 series wherever it ran (tests/test_companions.py). The FMUs must exist in fmu_dir before a worker
