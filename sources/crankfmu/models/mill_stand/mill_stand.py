@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...runtime.model import Effect, ParameterError, PhysicsModel, Variable
+from ...runtime.driven_crank import SHAFT_INPUTS, SHAFT_NAMES, crank_from_shaft
 
 # seed's structure table (W counts the local mobilities) and the rank count of the shipped
 # coaxial drives (scenarios/mechanisms/stand_drive_*_coaxial.toml, *_guided.toml);
@@ -69,13 +70,9 @@ class MillStandDrive(PhysicsModel):
         Variable("flange_tau", "N.m", "Drive torque M_D on the motor shaft", 0.0),
         Variable("flange_J", "kg.m2", "Inertia rigidly on the motor shaft (J_input)", 0.0,
                  min=0.0),
-        Variable("shaft_phi", "rad", "Input shaft angle i*(phi - phi_start) from the driver "
-                 "(effect driven_crank)", 0.0),
-        Variable("shaft_w", "rad/s", "Input shaft angular velocity i*phi' from the driver "
-                 "(effect driven_crank)", 0.0),
-    )
+    ) + SHAFT_INPUTS
     _ff = ("flange_tau", "flange_J")
-    _driven = ("shaft_phi", "shaft_w")  # feedthrough with effect driven_crank only
+    _driven = SHAFT_NAMES  # feedthrough with effect driven_crank only
     outputs = (
         Variable("flange_w", "rad/s", "Motor shaft angular velocity i*phi'", depends_on=_driven),
         Variable("flange_phi", "rad", "Motor shaft angle i*phi", depends_on=_driven),
@@ -222,8 +219,7 @@ class MillStandDrive(PhysicsModel):
     def crank_motion(self, x, u) -> tuple[float, float]:
         """(phi, phi'): the states, or with driven_crank the driver's shaft over the gear."""
         if self.on("driven_crank"):
-            i = self.p.gear_ratio
-            return self.p.phi_start + u[self.IN.shaft_phi] / i, u[self.IN.shaft_w] / i
+            return crank_from_shaft(self, u)
         return x[0], x[1]
 
     # -- contract -------------------------------------------------------------------------

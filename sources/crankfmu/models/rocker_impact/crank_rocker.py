@@ -9,6 +9,7 @@ import math
 import numpy as np
 
 from ...runtime.model import Effect, ParameterError, Variable
+from ...runtime.driven_crank import SHAFT_INPUTS, SHAFT_NAMES, crank_from_shaft
 from .rocker_impact import RockerImpact
 from ...runtime.roots import brentq
 
@@ -17,7 +18,7 @@ def _with_driven(v: Variable) -> Variable:
     if v.name not in ("T", "E_mech"):
         return v
     return Variable(v.name, v.unit, v.description, v.start, v.min, v.max,
-                    v.depends_on + ("shaft_phi", "shaft_w"))
+                    v.depends_on + SHAFT_NAMES)
 
 
 _ROCKER_PARAMETERS = tuple(v for v in RockerImpact.parameters
@@ -58,12 +59,8 @@ class CrankRockerHammer(RockerImpact):
                  0.0),
         Variable("flange_J", "kg.m2", "Inertia rigidly on the motor shaft (rotor, flywheel)",
                  0.0, min=0.0),
-        Variable("shaft_phi", "rad", "Input shaft angle i*(phi - phi_start) from the driver "
-                 "(effect driven_crank)", 0.0),
-        Variable("shaft_w", "rad/s", "Input shaft angular velocity i*phi' from the driver "
-                 "(effect driven_crank)", 0.0),
-    )
-    _driven = ("shaft_phi", "shaft_w")  # feedthrough with effect driven_crank only
+    ) + SHAFT_INPUTS
+    _driven = SHAFT_NAMES  # feedthrough with effect driven_crank only
     outputs = (
         Variable("flange_w", "rad/s", "Motor shaft speed i phi'", depends_on=_driven),
         Variable("flange_phi", "rad", "Motor shaft angle i phi", depends_on=_driven),
@@ -129,8 +126,7 @@ class CrankRockerHammer(RockerImpact):
     def crank_motion(self, x, u) -> tuple[float, float]:
         """(phi, phi'): the crank states, or with driven_crank the driver's shaft over the gear."""
         if self._driven:
-            i = self.p.gear_ratio
-            return self.p.phi_start + u[self.IN.shaft_phi] / i, u[self.IN.shaft_w] / i
+            return crank_from_shaft(self, u)
         return x[-4], x[-3]
 
     def rod(self, x, u):

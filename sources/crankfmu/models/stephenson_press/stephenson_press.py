@@ -9,6 +9,7 @@ import math
 import numpy as np
 
 from ...runtime.model import Effect, ParameterError, PhysicsModel, Variable
+from ...runtime.driven_crank import SHAFT_INPUTS, SHAFT_NAMES, crank_from_shaft
 
 G_STANDARD = 9.80665  # m/s^2
 EDGE_BAND = 1e-12      # rad per rad of |phi|: an edge this close to the restart was just passed
@@ -50,12 +51,8 @@ class StephensonPress(PhysicsModel):
         Variable("flange_tau", "N.m", "Drive torque M_D on the motor shaft", 0.0),
         Variable("flange_J", "kg.m2", "Inertia rigidly on the motor shaft (J_input)", 0.0,
                  min=0.0),
-        Variable("shaft_phi", "rad", "Input shaft angle i*(phi - phi_start) from the driver "
-                 "(effect driven_crank)", 0.0),
-        Variable("shaft_w", "rad/s", "Input shaft angular velocity i*phi' from the driver "
-                 "(effect driven_crank)", 0.0),
-    )
-    _driven = ("shaft_phi", "shaft_w")  # feedthrough with effect driven_crank only
+    ) + SHAFT_INPUTS
+    _driven = SHAFT_NAMES  # feedthrough with effect driven_crank only
     outputs = (
         Variable("flange_w", "rad/s", "Motor shaft angular velocity i*phi'", depends_on=_driven),
         Variable("flange_phi", "rad", "Motor shaft angle i*phi", depends_on=_driven),
@@ -167,8 +164,7 @@ class StephensonPress(PhysicsModel):
     def crank_motion(self, x, u) -> tuple[float, float]:
         """(phi, phi'): the states, or with driven_crank the driver's shaft over the gear."""
         if self.on("driven_crank"):
-            i = self.p.gear_ratio
-            return self.p.phi_start + u[self.IN.shaft_phi] / i, u[self.IN.shaft_w] / i
+            return crank_from_shaft(self, u)
         return x[0], x[1]
 
     def shaft_load(self, phi, w, J_input: float = 0.0) -> tuple[float, float]:
