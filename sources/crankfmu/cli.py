@@ -78,13 +78,14 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-estimate", action="store_true",
                    help="skip the error estimate (its companion at half the step costs "
                         "1.1-1.7 x the run: README, \"What it costs\")")
-    p.add_argument("--jobs", type=_positive_integer, default=1,
+    p.add_argument("--jobs", type=positive_integer, default=1,
                    help="processes for the run and the companion runs of its estimate (and of "
                         "--target's search): 2 runs the companions in a worker beside the run "
                         "(pays on runs of seconds with a free core); 1 (default) after it, here")
 
 
-def _positive_integer(text: str) -> int:
+def positive_integer(text: str) -> int:
+    """An argparse type: an integer >= 1 (--jobs)."""
     value = int(text)
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")

@@ -6,16 +6,9 @@ from __future__ import annotations
 from pathlib import Path
 
 
-def _jobs(text: str) -> int:
-    import argparse
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
-    return value
-
-
 def add_executor_options(p, what: str = "runs") -> None:
-    p.add_argument("--jobs", type=_jobs, default=None,
+    from ..cli import positive_integer
+    p.add_argument("--jobs", type=positive_integer, default=None,
                    help=f"local worker processes for the {what} (default: the number of cores; "
                         "1: one worker, runs one after another)")
     p.add_argument("--scheduler", metavar="ADDRESS",

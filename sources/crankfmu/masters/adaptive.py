@@ -20,11 +20,10 @@ of an edge is stretched to it, as the runner does at stop_time.
 from __future__ import annotations
 
 import bisect
-import math
 import warnings
 
 from .base import Master
-from .inputs import edge_reading_time, step_edges
+from .inputs import edge_reading_time, step_edges, step_to
 from .options import EXTRAPOLATION, TOLERANCE, Option, OptionError
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 5.0
@@ -67,11 +66,7 @@ class Adaptive(Master):
         i = bisect.bisect_right(self.edges, edge_reading_time(t))  # as value_at reads
         if i == len(self.edges) or t + h < self.edges[i] - self.min_step:
             return h
-        edge = self.edges[i]
-        h = edge - t
-        while t + h < edge:  # rounding: at most an ulp or two short
-            h = math.nextafter(h, math.inf)
-        return h
+        return step_to(t, self.edges[i])
 
     def _step(self, t: float, h: float) -> float:
         h = self._to_edge(t, h)

@@ -130,6 +130,15 @@ def edge_reading_time(t: float) -> float:
     return t + EDGE_ULPS * math.ulp(t)
 
 
+def step_to(t: float, edge: float) -> float:
+    """The step from t that ends at `edge` in floats: edge - t, rounded up by an ulp or two
+    where needed so that t + step >= edge (the next step's start then reads the new value)."""
+    step = edge - t
+    while t + step < edge:
+        step = math.nextafter(step, math.inf)
+    return step
+
+
 def split_at_edges(t: float, h: float, edges: list[float]) -> list[float]:
     """The pieces [s] a fixed-step master takes for the grid step (t, t + h) so that each edge
     strictly inside it ends a piece (external inputs are written at a step's start and held:
@@ -141,10 +150,7 @@ def split_at_edges(t: float, h: float, edges: list[float]) -> list[float]:
     end = t + h
     pieces, start = [], t
     while i < len(edges) and edge_reading_time(edges[i]) < end:
-        edge = edges[i]
-        piece = edge - start
-        while start + piece < edge:  # rounding: at most an ulp or two short
-            piece = math.nextafter(piece, math.inf)
+        piece = step_to(start, edges[i])
         pieces.append(piece)
         start += piece
         i += 1
