@@ -94,12 +94,12 @@ def test_every_output_that_reads_the_shaft_declares_it(name):
     names = [v.name for v in driven.inputs]
     u = np.zeros(len(names))
     x0 = np.asarray(driven.initial_state(u), dtype=float)
-    base = driven.output_values(0.0, x0, u)
+    base = np.asarray(driven.output_values(0.0, x0, u), dtype=float)
     changed = np.zeros(len(base), dtype=bool)
     for k, step in ((names.index("shaft_phi"), 0.7), (names.index("shaft_w"), 9.0)):
         v = u.copy()
         v[k] = step
-        changed |= driven.output_values(0.0, x0, v) != base
+        changed |= np.asarray(driven.output_values(0.0, x0, v), dtype=float) != base
     for out, moved in zip(driven.outputs, changed):
         if moved:
             assert {"shaft_phi", "shaft_w"} <= set(out.depends_on), out.name

@@ -100,8 +100,8 @@ def test_simulated_revolution_follows_the_closed_form():
 # -- rod forces --------------------------------------------------------------------------------
 def test_rod_forces_match_newton_euler_on_the_crank():
     """Newton-Euler on the crank alone: (i^2 J_in + J_crank) phi'' = i tau + moment of the rods."""
-    m = MillStandDrive({"rod_mismatch": 2e-4}, effects=["assembly_preload"])
-    m.p.mu_joint = 0.0                              # no friction torque in this check
+    m = MillStandDrive({"rod_mismatch": 2e-4, "mu_joint": 0.0},   # no friction torque here
+                       effects=["assembly_preload"])
     u = np.array([4000.0, 3.0])
     for phi in (0.3, 1.2, 2.0, 4.0, 5.5):
         for w in (0.0, 7.0):

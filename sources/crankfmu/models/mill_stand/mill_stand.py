@@ -4,6 +4,7 @@ Kinematics, reduced dynamics, preload, friction, variables and tests: README.md 
 """
 from __future__ import annotations
 
+import math
 
 import numpy as np
 
@@ -130,18 +131,85 @@ class MillStandDrive(PhysicsModel):
         if self.on("assembly_preload") and p.r_pin <= 0.0 and p.mu_joint > 0.0:
             raise ParameterError(name, "r_pin", p.r_pin, "> 0 when mu_joint > 0")
 
-    # -- kinematics -----------------------------------------------------------------------
+    def __init__(self, parameters=None, effects=None):
+        super().__init__(parameters, effects)
+        p = self.p
+        # the effect switches and what the parameters fix, read in every right-hand-side call
+        self._driven, self._rolling = self.on("driven_crank"), self.on("rolling_load")
+        P = self.preload()
+        # 2 mu r_pin |P|: the pin friction torque per unit lever (section 5); 0: no friction
+        self._friction_scale = 2.0 * p.mu_joint * p.r_pin * abs(P)
+        self._constants = (p.r, p.l, p.r * p.r, p.gear_ratio ** 2, p.J_crank, p.m_stand)
+        # rod force shares of the total tension T and the preload on top (section 4)
+        if self.redundant_rod_length():
+            l2, l4 = self.rod_lengths()
+            self._rod_shares = (l4 / (l2 + l4), l2 / (l2 + l4), P)
+        else:
+            self._rod_shares = (0.5, 0.5, P)
+        names = self.state_names()
+        self._energy_index = tuple(names.index(n) if n in names else None
+                                   for n in ("E_friction", "E_load"))
+        v = self.variant
+        q_rank = (Q_RANK_GUIDED if p.guides_hold_skew == 1.0 else Q_RANK_FREE_SKEW)[v]
+        # the outputs that are constant for a parameter set
+        self._constant_outputs = (P, self.stand_skew(), W_SEED[v], Q_SEED[v], q_rank)
+
+    # -- the equations: one scalar core -----------------------------------------------------
+    # The right-hand side and the outputs call `crank_terms` on floats (math: ~20x cheaper than
+    # numpy on one value); the public functions below reach the same core (kinematics and
+    # reduced_inertia also over an array of phi, by np.vectorize: the analyses' grids), so each
+    # equation is written once.
+    def crank_terms(self, phi: float, w: float, J_input: float) -> tuple[float, ...]:
+        """(J, J'/2, M_f, F_load, M_load, x, x', x'', beta, beta') at one crank state (phi,
+        phi' = w): kinematics (README section 2), reduced inertia (3), pin friction (5), rolling
+        load (6) and M_load = M_f + x' F_load - J'/2 phi'^2, the generalized force on the crank
+        apart from the drive's: J phi'' = i M_D + M_load. One function, not one per quantity:
+        the right-hand side calls it 7 times per step."""
+        r, l, r2, i2_, J_crank, m_s = self._constants
+        s, c = math.sin(phi), math.cos(phi)
+        rs = r * s
+        R = math.sqrt(l * l - rs * rs)
+        q = r2 * s * c / R                              # -dR/dphi
+        x = r * c + R
+        dx = -rs - q
+        ddx = -r * c - (r2 * (c - s) * (c + s) + q * q) / R  # r^2 cos 2phi: (c - s)(c + s)
+        dbeta = r * c / R
+        J = i2_ * J_input + J_crank + m_s * dx * dx
+        half_dJ = m_s * dx * ddx
+        M_f = F_load = 0.0
+        if self._friction_scale:  # sgn(phi') regularised; the lever (1 + beta') + |beta'|
+            M_f = -self._friction_scale * ((1.0 + dbeta) + abs(dbeta)) * \
+                math.tanh(w / self.p.w_reg)
+        if self._rolling:
+            F_load = -self.p.F_roll * math.tanh(dx * w / self.p.v_reg)
+        M_load = M_f + dx * F_load - half_dJ * w * w
+        return J, half_dJ, M_f, F_load, M_load, x, dx, ddx, math.asin(rs / l), dbeta
+
+    def _crank_acceleration(self, J: float, M_load: float, u) -> float:
+        """phi'' = (i M_D + M_load)/J from the core's J and M_load: the reduced equation
+        (section 3)."""
+        return (self.p.gear_ratio * u[self.IN.flange_tau] + M_load) / J
+
+    # -- the core for callers, and the rod forces --------------------------------------------
     def kinematics(self, phi):
         """(x, x', x'', beta, beta') for scalar or array phi (' = d/dphi)."""
-        r, l = self.p.r, self.p.l
-        s, c = np.sin(phi), np.cos(phi)
-        R = np.sqrt(l * l - (r * s) ** 2)
-        x = r * c + R
-        dx = -r * s - r * r * s * c / R
-        ddx = -r * c - r * r * np.cos(2 * phi) / R - r ** 4 * s * s * c * c / R ** 3
-        beta = np.arcsin(r * s / l)
-        dbeta = r * c / R
-        return x, dx, ddx, beta, dbeta
+        return _over(lambda a: self.crank_terms(a, 0.0, 0.0)[5:], phi, 5)
+
+    def reduced_inertia(self, phi, J_input: float):
+        """(J(phi), J'(phi)/2) at the crank."""
+        return _over(lambda a: self.crank_terms(a, 0.0, J_input)[:2], phi, 2)
+
+    def crank_acceleration(self, phi: float, w: float, u) -> float:
+        """phi'' at crank angle phi and speed w = phi' for the input vector u."""
+        terms = self.crank_terms(phi, w, u[self.IN.flange_J])
+        return self._crank_acceleration(terms[0], terms[4], u)
+
+    def rod_forces(self, a: float, F_load: float, beta: float) -> tuple[float, float]:
+        """(T2, T4): rod tensions for stand acceleration a (section 4): T = (F_load - m_s a) /
+        cos beta shared by the rods' stiffness (or equally, self-aligning), and the preload."""
+        share2, share4, P = self._rod_shares
+        T = (F_load - self.p.m_stand * a) / math.cos(beta)
+        return T * share2 - P, T * share4 + P
 
     # -- preload --------------------------------------------------------------------------
     @property
@@ -169,59 +237,6 @@ class MillStandDrive(PhysicsModel):
             return 0.0
         return self.p.rod_mismatch / self.p.rod_spacing
 
-    def friction_torque(self, phi, w):
-        """M_f at the crank from the preload in the four pins (resisting, sign of -w)."""
-        P = abs(self.preload())
-        if P == 0.0 or self.p.mu_joint == 0.0:
-            return 0.0 * np.asarray(phi, dtype=float)
-        dbeta = self.kinematics(phi)[4]
-        lever = (1.0 + dbeta) + np.abs(dbeta)
-        return -2.0 * self.p.mu_joint * self.p.r_pin * P * lever * np.tanh(w / self.p.w_reg)
-
-    def load_force(self, phi, w):
-        if not self.on("rolling_load"):
-            return 0.0 * np.asarray(phi, dtype=float)
-        v = self.kinematics(phi)[1] * w
-        return -self.p.F_roll * np.tanh(v / self.p.v_reg)
-
-    def reduced_inertia(self, phi, J_input: float):
-        p = self.p
-        _, dx, ddx, _, _ = self.kinematics(phi)
-        J = p.gear_ratio ** 2 * J_input + p.J_crank + p.m_stand * dx * dx
-        return J, p.m_stand * dx * ddx
-
-    def crank_acceleration(self, phi, w, u):
-        J, half_dJ = self.reduced_inertia(phi, u[self.IN.flange_J])
-        dx = self.kinematics(phi)[1]
-        M = (self.p.gear_ratio * u[self.IN.flange_tau] + self.friction_torque(phi, w)
-             + dx * self.load_force(phi, w) - half_dJ * w * w)
-        return M / J
-
-    def rod_forces(self, phi, w, u):
-        """(T2, T4, a): rod tensions and stand acceleration."""
-        x, dx, ddx, beta, _ = self.kinematics(phi)
-        a = ddx * w * w + dx * self.crank_acceleration(phi, w, u)
-        T = (self.load_force(phi, w) - self.p.m_stand * a) / np.cos(beta)
-        if self.redundant_rod_length():
-            l2, l4 = self.rod_lengths()
-            P = self.preload()
-            return T * l4 / (l2 + l4) - P, T * l2 / (l2 + l4) + P, a
-        return 0.5 * T, 0.5 * T, a
-
-    def shaft_load(self, phi, w, J_input: float = 0.0) -> tuple[float, float]:
-        """(shaft_tau, shaft_J) at the input shaft for crank angle phi and speed w = phi'."""
-        i = self.p.gear_ratio
-        J, half_dJ = self.reduced_inertia(phi, J_input)
-        dx = self.kinematics(phi)[1]
-        M = self.friction_torque(phi, w) + dx * self.load_force(phi, w) - half_dJ * w * w
-        return float(M) / i, float(J) / (i * i)
-
-    def crank_motion(self, x, u) -> tuple[float, float]:
-        """(phi, phi'): the states, or with driven_crank the driver's shaft over the gear."""
-        if self.on("driven_crank"):
-            return crank_from_shaft(self, u)
-        return x[0], x[1]
-
     # -- contract -------------------------------------------------------------------------
     def state_names(self):
         names = [] if self.on("driven_crank") else ["phi", "w_crank"]
@@ -233,33 +248,48 @@ class MillStandDrive(PhysicsModel):
 
     def initial_state(self, u):
         crank = [] if self.on("driven_crank") else [self.p.phi_start, self.p.w_start]
-        return np.array(crank + [0.0] * (len(self.state_names()) - len(crank)), dtype=float)
+        return crank + [0.0] * (len(self.state_names()) - len(crank))
+
+    def crank_motion(self, x, u) -> tuple[float, float]:
+        """(phi, phi'): the states, or with driven_crank the driver's shaft over the gear."""
+        if self._driven:
+            return crank_from_shaft(self, u)
+        return x[0], x[1]
 
     def derivatives(self, t, x, u):
         phi, w = self.crank_motion(x, u)
-        out = [] if self.on("driven_crank") else [w, self.crank_acceleration(phi, w, u)]
-        if self.on("assembly_preload"):
-            out.append(-self.friction_torque(phi, w) * w)
-        if self.on("rolling_load"):
-            out.append(-self.load_force(phi, w) * self.kinematics(phi)[1] * w)
-        return np.array(out, dtype=float)
+        J, _, M_f, F_load, M_load, _, dx, _, _, _ = self.crank_terms(phi, w, u[self.IN.flange_J])
+        out = [] if self._driven else [w, self._crank_acceleration(J, M_load, u)]
+        friction, load = self._energy_index
+        if friction is not None:
+            out.append(-M_f * w)
+        if load is not None:
+            out.append(-F_load * dx * w)
+        return out
 
     def output_values(self, t, x, u):
         phi, w = self.crank_motion(x, u)
-        names = self.state_names()
         i = self.p.gear_ratio
-        xs, dx, _, _, _ = self.kinematics(phi)
-        T2, T4, a = (0.0, 0.0, 0.0) if self.on("driven_crank") else self.rod_forces(phi, w, u)
-        M_f = self.friction_torque(phi, w)
-        J, _ = self.reduced_inertia(phi, u[self.IN.flange_J])
-        E_f = x[names.index("E_friction")] if "E_friction" in names else 0.0
-        E_l = x[names.index("E_load")] if "E_load" in names else 0.0
-        v = self.variant
-        q_rank = (Q_RANK_GUIDED if self.p.guides_hold_skew == 1.0 else Q_RANK_FREE_SKEW)[v]
-        shaft_tau, shaft_J = self.shaft_load(phi, w, u[self.IN.flange_J])
-        return np.array(self.output_vector(dict(
+        J, _, M_f, F_load, M_load, xs, dx, ddx, beta, _ = self.crank_terms(
+            phi, w, u[self.IN.flange_J])
+        if self._driven:  # the crank acceleration is the driver's, not known here
+            a = T2 = T4 = 0.0
+        else:
+            a = ddx * w * w + dx * self._crank_acceleration(J, M_load, u)
+            T2, T4 = self.rod_forces(a, F_load, beta)
+        friction, load = self._energy_index
+        P, skew, W, q, q_rank = self._constant_outputs
+        return self.output_vector(dict(
             flange_w=i * w, flange_phi=i * phi, phi=phi, w_crank=w, stand_x=xs, stand_v=dx * w,
-            stand_a=a, F_rod2=T2, F_rod4=T4, preload=self.preload(), stand_skew=self.stand_skew(),
-            M_friction=M_f, P_friction=-M_f * w, E_friction=E_f, F_load=self.load_force(phi, w),
-            E_load=E_l, J_reduced=J, W_mobility=W_SEED[v], q_malyshev=Q_SEED[v], q_rank=q_rank,
-            shaft_tau=shaft_tau, shaft_J=shaft_J)), dtype=float)
+            stand_a=a, F_rod2=T2, F_rod4=T4, preload=P, stand_skew=skew,
+            M_friction=M_f, P_friction=-M_f * w,
+            E_friction=0.0 if friction is None else x[friction], F_load=F_load,
+            E_load=0.0 if load is None else x[load], J_reduced=J, W_mobility=W,
+            q_malyshev=q, q_rank=q_rank, shaft_tau=M_load / i, shaft_J=J / (i * i)))
+
+
+def _over(scalar_function, phi, n_out: int):
+    """scalar_function at a scalar phi, or elementwise over an array (tuples of arrays)."""
+    if isinstance(phi, (float, int)):
+        return scalar_function(float(phi))
+    return np.vectorize(scalar_function, otypes=[float] * n_out)(np.asarray(phi, dtype=float))
