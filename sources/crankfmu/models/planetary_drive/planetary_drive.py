@@ -8,6 +8,8 @@ from __future__ import annotations
 import enum
 import itertools
 import math
+import operator
+from math import exp
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,9 +27,8 @@ NEVER = -1.0  # event-time outputs before the first such event
 
 class Direction(enum.Enum):
     """How a friction element moves. `sign` is the sign of its speed while sliding, 0 while
-    locked: the d of F_k = -C_k d and of the slip power d w. A plain int attribute, not an
-    IntEnum: an IntEnum times a numpy float costs ~1.5 us (numpy's slow path), in every
-    right-hand side."""
+    locked: the d of F_k = -C_k d and of the slip power d w. The step path reads the three
+    signs as a tuple of ints, derived once per mode change (`_mode_changed`)."""
 
     BACKWARD = -1
     LOCKED = 0
@@ -60,7 +61,9 @@ class BrakeState:
 @dataclass
 class Modes:
     """The discrete state: everything but the continuous states that the motion depends on.
-    `to_json`/`from_json` give the JSON-safe form the FMU saves (floats exact, -inf as None)."""
+    `to_json`/`from_json` give the JSON-safe form the FMU saves (floats exact, -inf as None).
+    The model changes it only through its own methods, each followed by `_mode_changed`, which
+    derives what the step path reads from it."""
 
     command: int
     brakes: dict[str, BrakeState]
@@ -112,6 +115,9 @@ class Event:
 
 
 LOCKED = Direction.LOCKED  # a module name: reading it off the Enum class costs ~50 ns, often
+# The lock of the current modes, as the step path reads it: an element's index in ELEMENTS (one
+# locked), or one of these
+NO_LOCK, ALL_LOCKED = -1, 3
 
 # Events are values: built once here, not at every integration restart (constructing a frozen
 # dataclass costs ~1 us). TIME events carry their time and are built when needed.
@@ -263,53 +269,77 @@ class PlanetaryClutchDrive(PhysicsModel):
 
     def set_discrete_state(self, state: dict) -> None:
         self.modes = Modes.from_json(state)
+        self._mode_changed()
 
     def __init__(self, parameters=None, effects=None):
         super().__init__(parameters, effects)
         self._derive()
         self.modes = self._fresh_modes()
+        self._u_of_t = None  # the inputs of the integration under way (its event functions)
         self._events: list[Event] = []
+        IN = self.IN  # the port inputs of an input vector, by name, in one C call
+        self._ports = operator.itemgetter(IN.sun_tau, IN.sun_J, IN.flange_tau, IN.flange_J)
+        self._mode_changed()
 
     def _derive(self) -> None:
         """Constants derived from the parameters (again in initial_state, so a host that sets
         parameters on self.p after construction is safe)."""
-        pr = self.ratio
-        self._G = {"a": np.array([-pr, 1.0 + pr]), "b": np.array([1.0, 0.0]),
-                   "h": np.array([0.0, 1.0])}
-        self._N = {"a": np.array([1.0 + pr, pr]), "b": np.array([0.0, 1.0]),
-                   "h": np.array([1.0, 0.0])}
         p = self.p
+        pr = self.ratio
+        self._constants = (pr, 1.0 + pr, p.M_ca, p.M_cb, p.M_ch)
+        # G_k (w_k = G_k . v, v = (w_b, w_h)) and N_k (G_k . N_k = 0), in ELEMENTS order
+        self._G = ((-pr, 1.0 + pr), (1.0, 0.0), (0.0, 1.0))
+        self._N = ((1.0 + pr, pr), (0.0, 1.0), (1.0, 0.0))
         self._laws = {k: (getattr(p, "Mp_" + k), getattr(p, "alpha_" + k),
                           getattr(p, "beta_" + k), getattr(p, "tc_" + k),
                           getattr(p, "tr_" + k), getattr(p, "z_" + k)) for k in MEMBERS}
         self._power = self.on("power_law")
+
+    def _mode_changed(self) -> None:
+        """Derive from `modes` what the step path reads, after every change of the discrete
+        state: the elements' signs (a tuple of ints), the lock (NO_LOCK, an element's index or
+        ALL_LOCKED), the two brake laws as functions of time; and forget what belonged to the
+        old modes (the mass map, the event functions)."""
+        elements = self.modes.elements
+        self._signs_now = tuple(elements[k].direction.sign for k in ELEMENTS)
+        locked = [i for i, s in enumerate(self._signs_now) if not s]
+        self._lock = NO_LOCK if not locked else locked[0] if len(locked) == 1 else ALL_LOCKED
+        self._torque_b, self._torque_h = self._brake_law("b"), self._brake_law("h")
+        self._map_key = self._frictions_key = None
+        self._event_list = None
 
     # -- brake laws ------------------------------------------------------------------------
     def _law(self, k):
         """(M_p, alpha, beta, t_c, t_r, z) of brake k."""
         return self._laws[k]
 
-    def brake_torque(self, k: str, t: float) -> float:
-        """Torque capacity M_tk(t) of brake k from its law and the last command edge."""
+    def _brake_law(self, k: str):
+        """M_tk(t), brake k's torque capacity as a function of time t, from its law and its
+        state at the last command edge (t0, M0). Built once per edge: the right-hand side
+        calls it, so the branches on the law are taken here, not in every call."""
         brake = self.modes.brakes[k]
         engaging, t0, M0 = brake.engaging, brake.t0, brake.M0
         Mp, alpha, beta, tc, tr, z = self._law(k)
-        tau = max(t - t0, 0.0)
-        if engaging:
-            if M0 == Mp:
-                return Mp
-            if self._power:
-                return M0 + (Mp - M0) * min(tau / tc, 1.0) ** z
-            return Mp - (Mp - M0) * math.exp(-alpha * tau)
-        if M0 == 0.0:
-            return 0.0
+        # tau = t - t0 >= 0 written as a conditional expression: max() costs as much as exp()
+        if (engaging and M0 == Mp) or (not engaging and M0 == 0.0):
+            return lambda t: M0  # at the law's end value already
+        if self._power and engaging:
+            rise = Mp - M0
+            return lambda t: M0 + rise * min((t - t0 if t > t0 else 0.0) / tc, 1.0) ** z
         if self._power:
-            return M0 * (1.0 - min(tau / tr, 1.0)) ** z
-        return M0 * math.exp(-beta * tau)
+            return lambda t: M0 * (1.0 - min((t - t0 if t > t0 else 0.0) / tr, 1.0)) ** z
+        if engaging:
+            gap = Mp - M0
+            return lambda t: Mp - gap * exp(-alpha * (t - t0 if t > t0 else 0.0))
+        return lambda t: M0 * exp(-beta * (t - t0 if t > t0 else 0.0))
+
+    def brake_torque(self, k: str, t: float) -> float:
+        """Torque capacity M_tk(t) of brake k from its law and the last command edge."""
+        return self._brake_law(k)(t)
 
     def _breakpoints(self) -> list[float]:
         """Kinks of the power law (t0 + t_c, t0 + t_r) after the last discrete update."""
-        if not self.on("power_law"):
+        if not self._power:
             return []
         out = []
         for k in MEMBERS:
@@ -322,70 +352,102 @@ class PlanetaryClutchDrive(PhysicsModel):
                     out.append(tb)
         return out
 
-    # -- mechanics -------------------------------------------------------------------------
-    def mass_matrix(self, u) -> np.ndarray:
-        p, pr = self.p, self.ratio
-        Ja = p.J_a + u[self.IN.sun_J]
-        Jh = p.J_h + u[self.IN.flange_J]
-        return np.array([[Ja * pr * pr + p.J_b, -Ja * pr * (1 + pr)],
-                         [-Ja * pr * (1 + pr), Ja * (1 + pr) ** 2 + Jh]])
-
-    def _geometry(self):
-        """G_k (w_k = G_k . v, v = (w_b, w_h)) and N_k (G_k . N_k = 0) of the friction elements."""
-        return self._G, self._N
-
-    def _loads(self, t, u):
-        """(M, Q, C): mass matrix, generalised port torques, friction capacities."""
+    # -- mechanics: plain floats (the right-hand side runs ~7 times per step) ----------------
+    def _mass(self, sun_J: float, flange_J: float) -> tuple[float, float, float]:
+        """(M_bb, M_bh, M_hh) of the mass matrix M of v = (w_b, w_h) (model card section 2)."""
         p = self.p
-        Q = u[self.IN.sun_tau] * self._G["a"] + np.array([0.0, u[self.IN.flange_tau]])
-        C = {"a": p.M_ca, "b": self.brake_torque("b", t) + p.M_cb,
-             "h": self.brake_torque("h", t) + p.M_ch}
-        return self.mass_matrix(u), Q, C
+        pr, q = self._constants[:2]
+        Ja = p.J_a + sun_J
+        Jh = p.J_h + flange_J
+        return Ja * pr * pr + p.J_b, -Ja * pr * q, Ja * q * q + Jh
 
-    def _signs(self) -> dict[str, int]:
-        """Direction.sign of each friction element (+1/-1 sliding, 0 locked)."""
-        elements = self.modes.elements
-        return {k: elements[k].direction.sign for k in ELEMENTS}
+    def _forces(self, u, signs, M_tb: float, M_th: float) -> tuple[float, float]:
+        """(Qt_b, Qt_h): the generalised forces on (w_b, w_h) of the port torques and of the
+        friction of the elements that slide in `signs` (F_k = -C_k d_k; 0 = locked) with the
+        brake torques M_tb, M_th. With M_A = sun_tau + F_a:
+        Qt_b = -p M_A + F_b, Qt_h = (1 + p) M_A + flange_tau + F_h."""
+        pr, q, M_ca, M_cb, M_ch = self._constants
+        sun_tau, _, flange_tau, _ = self._ports(u)
+        s_a, s_b, s_h = signs
+        M_A = sun_tau - M_ca * s_a
+        return -pr * M_A - (M_tb + M_cb) * s_b, q * M_A + flange_tau - (M_th + M_ch) * s_h
 
-    def _solve(self, t, u, signs=None):
-        """Accelerations (dw_b, dw_h), friction torques F_k and capacities C_k in the modes
-        `signs` (Direction.sign per element; default: the current ones). Locked sets are {}, {j} or all three (two locked
-        members hold the third at rest by Willis); with all three locked the friction torques
-        are statically indeterminate: F_a is chosen closest to 0 in its feasible interval and
-        `slack` is the interval's width (negative: the rest cannot be held)."""
-        signs = self._signs() if signs is None else signs
-        M, Q, C = self._loads(t, u)
-        G, N = self._geometry()
-        F = {k: -C[k] * d for k, d in signs.items() if d}
-        Qt = Q + sum((F[k] * G[k] for k in F), np.zeros(2))
-        locked = [k for k in ELEMENTS if not signs[k]]
-        slack = math.inf
-        if not locked:
-            det = M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]
-            a = np.array([M[1, 1] * Qt[0] - M[0, 1] * Qt[1],
-                          M[0, 0] * Qt[1] - M[1, 0] * Qt[0]]) / det
-        elif len(locked) == 1:
-            j = locked[0]
-            n = N[j]
-            a = (n @ Qt) / (n @ M @ n) * n
-            F[j] = float(G[j] @ (M @ a - Qt)) / float(G[j] @ G[j])
+    def _loads(self, t, u, signs) -> tuple[float, float, float, float]:
+        """(Qt_b, Qt_h, M_tb, M_th): `_forces` with the brake torques at t, and those."""
+        M_tb, M_th = self._torque_b(t), self._torque_h(t)
+        return (*self._forces(u, signs, M_tb, M_th), M_tb, M_th)
+
+    def _map(self, sun_J: float, flange_J: float) -> tuple[float, ...]:
+        """(K_bb, K_bh, K_hb, K_hh, f_b, f_h): in the current lock, the accelerations are
+        v' = K Qt and the locked element's constraint torque is F_j = f . Qt, both linear in
+        the generalised forces. No lock: K = M^-1. One element j locked (G_j . v' = 0):
+        v' = lambda N_j with lambda = N_j . Qt / N_j.M.N_j, and F_j = G_j.(M v' - Qt)/G_j.G_j.
+        All locked: K = 0 (F from `_rest_interval`). K depends on the mode and the port
+        inertias only, so it is kept until one of them changes: within a mode the state does
+        not enter the accelerations at all."""
+        if self._map_key == (sun_J, flange_J):
+            return self._map_value
+        m_bb, m_bh, m_hh = self._mass(sun_J, flange_J)
+        lock = self._lock
+        f = (0.0, 0.0)
+        if lock == NO_LOCK:
+            det = m_bb * m_hh - m_bh * m_bh
+            K = (m_hh / det, -m_bh / det, -m_bh / det, m_bb / det)
+        elif lock == ALL_LOCKED:
+            K = (0.0, 0.0, 0.0, 0.0)
         else:
-            a = np.zeros(2)
-            lo, hi, F_a = self._rest_interval(Qt, C)
-            slack = hi - lo
-            pr = self.ratio
-            F["a"], F["b"], F["h"] = F_a, -Qt[0] + pr * F_a, -Qt[1] - (1 + pr) * F_a
-        return a, F, C, slack
+            (g_b, g_h), (n_b, n_h) = self._G[lock], self._N[lock]
+            nMn = n_b * (m_bb * n_b + m_bh * n_h) + n_h * (m_bh * n_b + m_hh * n_h)
+            K = (n_b * n_b / nMn, n_b * n_h / nMn, n_h * n_b / nMn, n_h * n_h / nMn)
+            # rows of M K - 1, projected on G_j
+            r_bb, r_bh = m_bb * K[0] + m_bh * K[2] - 1.0, m_bb * K[1] + m_bh * K[3]
+            r_hb, r_hh = m_bh * K[0] + m_hh * K[2], m_bh * K[1] + m_hh * K[3] - 1.0
+            gg = g_b * g_b + g_h * g_h
+            f = ((g_b * r_bb + g_h * r_hb) / gg, (g_b * r_bh + g_h * r_hh) / gg)
+        self._map_key, self._map_value = (sun_J, flange_J), K + f
+        return self._map_value
 
-    def _rest_interval(self, Q, C):
+    def _frictions(self, t, u) -> tuple[float, ...]:
+        """(F_a, F_b, F_h, C_a, C_b, C_h, slack) in the current modes: friction torques F_k
+        and capacities C_k (C_a = M_ca, C_b = M_tb + M_cb, C_h = M_th + M_ch). Sliding:
+        F_k = -C_k d_k; one element locked: its constraint torque; all locked (two locked
+        members hold the third at rest by Willis): the torques are statically indeterminate,
+        F_a is chosen closest to 0 in its feasible interval and `slack` is the interval's width
+        (negative: the rest cannot be held; +inf in the other modes).
+        A function of t and the port inputs in a mode, so the last value is kept: within a step
+        the hold check, both break-free event functions and the outputs ask at the same time."""
+        sun_tau, sun_J, flange_tau, flange_J = self._ports(u)
+        key = (t, sun_tau, sun_J, flange_tau, flange_J)
+        if key == self._frictions_key:
+            return self._frictions_value
+        pr, q, M_ca, M_cb, M_ch = self._constants
+        signs = self._signs_now
+        Qt_b, Qt_h, M_tb, M_th = self._loads(t, u, signs)
+        C = (M_ca, M_tb + M_cb, M_th + M_ch)
+        F = [-C[0] * signs[0], -C[1] * signs[1], -C[2] * signs[2]]
+        slack = math.inf
+        lock = self._lock
+        if lock == ALL_LOCKED:
+            lo, hi, F_a = self._rest_interval(Qt_b, Qt_h, C)
+            slack = hi - lo
+            F = [F_a, -Qt_b + pr * F_a, -Qt_h - q * F_a]
+        elif lock != NO_LOCK:
+            f_b, f_h = self._map(sun_J, flange_J)[4:]
+            F[lock] = f_b * Qt_b + f_h * Qt_h
+        self._frictions_key, self._frictions_value = key, (*F, *C, slack)
+        return self._frictions_value
+
+    def _rest_interval(self, Q_b, Q_h, C):
         """All at rest: F_b = -Q_b + p F_a, F_h = -Q_h - (1+p) F_a; the F_a that keep every
         |F_k| <= C_k form [lo, hi]. Returns (lo, hi, F_a closest to 0 within it)."""
-        pr = self.ratio
-        lo = max(-C["a"], (Q[0] - C["b"]) / pr, (-Q[1] - C["h"]) / (1 + pr))
-        hi = min(C["a"], (Q[0] + C["b"]) / pr, (-Q[1] + C["h"]) / (1 + pr))
+        pr, q = self._constants[:2]
+        C_a, C_b, C_h = C
+        lo = max(-C_a, (Q_b - C_b) / pr, (-Q_h - C_h) / q)
+        hi = min(C_a, (Q_b + C_b) / pr, (-Q_h + C_h) / q)
         F_a = min(max(0.0, lo), hi) if lo <= hi else 0.5 * (lo + hi)
         return lo, hi, F_a
 
+    # -- mode decisions (at events only) --------------------------------------------------
     def _choose_modes(self, t, u, zero, forced=None, shrink=1.0) -> None:
         """Modes of the members in `zero` (speed exactly zero now), the others keeping theirs
         (`forced`: members made to slide in a given direction). Coulomb friction with
@@ -396,14 +458,19 @@ class PlanetaryClutchDrive(PhysicsModel):
         the others slide), or a smooth point of one sign pattern (all slide): evaluate f at
         each candidate and keep the least. `shrink` < 1 scales the stuck capacities (used at a
         break-free event to decide on the side of breaking free)."""
+        elements = self.modes.elements
         for k, direction in (forced or {}).items():
-            self.modes.elements[k].direction = direction
-        signs = self._signs()
+            elements[k].direction = direction
         zero = [k for k in ELEMENTS if k in zero and k not in (forced or {})]
-        M, Q, C = self._loads(t, u)
-        G, N = self._geometry()
-        Qt = Q + sum((-C[k] * signs[k] * G[k] for k in ELEMENTS
-                      if k not in zero and signs[k]), np.zeros(2))
+        signs = tuple(0 if k in zero else elements[k].direction.sign for k in ELEMENTS)
+        Qt_b, Qt_h, M_tb, M_th = self._loads(t, u, signs)
+        _, _, M_ca, M_cb, M_ch = self._constants
+        _, sun_J, _, flange_J = self._ports(u)
+        m_bb, m_bh, m_hh = self._mass(sun_J, flange_J)
+        M, Qt = np.array([[m_bb, m_bh], [m_bh, m_hh]]), np.array([Qt_b, Qt_h])
+        C = dict(zip(ELEMENTS, (M_ca, M_tb + M_cb, M_th + M_ch)))
+        G = {k: np.array(g) for k, g in zip(ELEMENTS, self._G)}
+        N = {k: np.array(n) for k, n in zip(ELEMENTS, self._N)}
         Cz = {k: shrink * C[k] for k in zero}
 
         def f(a):
@@ -417,21 +484,27 @@ class PlanetaryClutchDrive(PhysicsModel):
             lam = math.copysign(max(abs(q) - c, 0.0), q) / float(n @ M @ n)
             if lam != 0.0:
                 candidates.append((lam * n, {j}))
-        for signs in itertools.product((-1.0, 1.0), repeat=len(zero)):
-            rhs = Qt - sum((Cz[k] * s * G[k] for k, s in zip(zero, signs)), np.zeros(2))
+        for pattern in itertools.product((-1.0, 1.0), repeat=len(zero)):
+            rhs = Qt - sum((Cz[k] * s * G[k] for k, s in zip(zero, pattern)), np.zeros(2))
             a = np.linalg.solve(M, rhs)
-            if all(s * (G[k] @ a) > 0.0 for k, s in zip(zero, signs)):
+            if all(s * (G[k] @ a) > 0.0 for k, s in zip(zero, pattern)):
                 candidates.append((a, set()))
         a, stuck = min(candidates, key=lambda c: (f(c[0]), -len(c[1])))
         if len(stuck) == 2:  # two stuck hold the third (cannot happen for the minimiser)
             stuck = set(ELEMENTS)
         for k in zero:
-            self.modes.elements[k].direction = LOCKED if k in stuck else \
+            elements[k].direction = LOCKED if k in stuck else \
                 (Direction.FORWARD if G[k] @ a > 0.0 else Direction.BACKWARD)
+        self._mode_changed()
 
     def _lock_set(self) -> list[str]:
         elements = self.modes.elements
         return [k for k in ELEMENTS if elements[k].direction is LOCKED]
+
+    def _signs(self) -> dict[str, int]:
+        """Direction.sign of each friction element (+1/-1 sliding, 0 locked)."""
+        elements = self.modes.elements
+        return {k: elements[k].direction.sign for k in ELEMENTS}
 
     def _record(self, t, before: dict) -> None:
         """Count locks and break-frees between the modes `before` (`_signs()`) and now."""
@@ -445,7 +518,7 @@ class PlanetaryClutchDrive(PhysicsModel):
                 element.n_slip += 1
                 element.t_slip = float(t)
 
-    def _zero_speeds(self, x) -> np.ndarray:
+    def _zero_speeds(self, x):
         """Put the locked members' speeds exactly at zero (all locked: everything at rest)."""
         locked = self._lock_set()
         if len(locked) >= 2:
@@ -475,16 +548,19 @@ class PlanetaryClutchDrive(PhysicsModel):
         modes.command = int(value)
         modes.t_command = float(t)
         modes.n_events += 1
+        self._mode_changed()
 
     def _holds(self, t, u) -> bool:
         """Do the present locks hold (friction torques within capacity)?"""
-        _, F, C, slack = self._solve(t, u)
-        locked = self._lock_set()
-        if len(locked) == 3:
-            return slack >= 0.0
-        return all(abs(F[k]) <= C[k] for k in locked)
+        lock = self._lock
+        if lock == NO_LOCK:
+            return True
+        frictions = self._frictions(t, u)
+        if lock == ALL_LOCKED:
+            return frictions[6] >= 0.0
+        return abs(frictions[lock]) <= frictions[3 + lock]
 
-    def on_input_change(self, t, x, u) -> np.ndarray:
+    def on_input_change(self, t, x, u):
         """Discrete update for inputs that jumped at time t (a communication point): a command
         edge starts engagement/stopping, and locks that no longer hold break free. Hosts that
         integrate the model themselves (monolithic references) call this after every input
@@ -517,6 +593,7 @@ class PlanetaryClutchDrive(PhysicsModel):
         w = {"a": p.w_a_start, "b": x[X.w_b], "h": x[X.w_h]}
         for k in ELEMENTS:
             self.modes.elements[k].direction = Direction(int(np.sign(w[k])))
+        self._mode_changed()
         zero = [k for k in ELEMENTS if w[k] == 0.0]
         self._choose_modes(0.0, u, zero)
         return self._zero_speeds(x)
@@ -530,95 +607,115 @@ class PlanetaryClutchDrive(PhysicsModel):
         return np.array([10.0, 10.0, w / self.ratio, w / (1 + self.ratio), E, E, E, E, E])
 
     def sun_speed(self, x) -> float:
-        if self.modes.elements["a"].direction is LOCKED:
+        """w_a = -p w_b + (1 + p) w_h (Willis); exactly 0.0 while the sun is locked."""
+        if not self._signs_now[0]:
             return 0.0
-        pr = self.ratio
-        return -pr * x[X.w_b] + (1 + pr) * x[X.w_h]
+        pr, q = self._constants[:2]
+        return -pr * x[X.w_b] + q * x[X.w_h]
 
     def derivatives(self, t, x, u):
-        p = self.p
-        a, _, C, _ = self._solve(t, u)
-        w_b, w_h = x[X.w_b], x[X.w_h]
-        e = self.modes.elements
-        w_a = self.sun_speed(x)
-        slip_a, slip_b, slip_h = (e["a"].direction.sign * w_a, e["b"].direction.sign * w_b,
-                                  e["h"].direction.sign * w_h)
-        return np.array([  # in the order of STATE_NAMES
-            w_b, w_h, a[0], a[1],
-            (C["b"] - p.M_cb) * slip_b,
-            (C["h"] - p.M_ch) * slip_h,
-            p.M_ca * slip_a + p.M_cb * slip_b + p.M_ch * slip_h,
-            u[self.IN.sun_tau] * w_a,
-            u[self.IN.flange_tau] * w_h,
-        ])
+        _, _, w_b, w_h, _, _, _, _, _ = x
+        sun_tau, sun_J, flange_tau, flange_J = self._ports(u)
+        Qt_b, Qt_h, M_tb, M_th = self._loads(t, u, self._signs_now)
+        K_bb, K_bh, K_hb, K_hh, _, _ = self._map(sun_J, flange_J)
+        pr, q, M_ca, M_cb, M_ch = self._constants
+        s_a, s_b, s_h = self._signs_now
+        w_a = -pr * w_b + q * w_h if s_a else 0.0
+        slip_b, slip_h = s_b * w_b, s_h * w_h
+        return (  # in the order of STATE_NAMES
+            w_b, w_h, K_bb * Qt_b + K_bh * Qt_h, K_hb * Qt_b + K_hh * Qt_h,
+            M_tb * slip_b,
+            M_th * slip_h,
+            M_ca * s_a * w_a + M_cb * slip_b + M_ch * slip_h,
+            sun_tau * w_a,
+            flange_tau * w_h,
+        )
 
     def kinetic_energy(self, x, u) -> float:
-        w = np.array([x[X.w_b], x[X.w_h]])
-        return 0.5 * float(w @ self.mass_matrix(u) @ w)
+        """1/2 v.M.v."""
+        _, sun_J, _, flange_J = self._ports(u)
+        m_bb, m_bh, m_hh = self._mass(sun_J, flange_J)
+        w_b, w_h = x[X.w_b], x[X.w_h]
+        return 0.5 * (m_bb * w_b * w_b + 2.0 * m_bh * w_b * w_h + m_hh * w_h * w_h)
 
     def output_values(self, t, x, u):
-        pr = self.ratio
-        _, F, _, _ = self._solve(t, u)
+        phi_b, phi_h, w_b, w_h, E_brake_b, E_brake_h, E_resist, W_sun, W_flange = x
+        pr, q = self._constants[:2]
+        F_a, F_b, F_h = self._frictions(t, u)[:3]
         w_a = self.sun_speed(x)
-        phi_a = -pr * x[X.phi_b] + (1 + pr) * x[X.phi_h]
         m = self.modes
         b, h = m.elements["b"], m.elements["h"]
-        return np.array(self.output_vector(dict(
-            sun_w=w_a, sun_phi=phi_a, flange_w=x[X.w_h], flange_phi=x[X.phi_h],
-            w_a=w_a, w_b=x[X.w_b], w_h=x[X.w_h],
-            M_tb=self.brake_torque("b", t), M_th=self.brake_torque("h", t),
-            tau_b=F["b"], tau_h=F["h"], tau_a=F["a"],
-            E_brake_b=x[X.E_brake_b], E_brake_h=x[X.E_brake_h], E_resist=x[X.E_resist],
-            W_sun=x[X.W_sun], W_flange=x[X.W_flange], E_kin=self.kinetic_energy(x, u),
+        return self.output_vector(dict(
+            sun_w=w_a, sun_phi=-pr * phi_b + q * phi_h, flange_w=w_h, flange_phi=phi_h,
+            w_a=w_a, w_b=w_b, w_h=w_h, M_tb=self._torque_b(t), M_th=self._torque_h(t),
+            tau_b=F_b, tau_h=F_h, tau_a=F_a,
+            E_brake_b=E_brake_b, E_brake_h=E_brake_h, E_resist=E_resist,
+            W_sun=W_sun, W_flange=W_flange, E_kin=self.kinetic_energy(x, u),
             period=float(self.period()), t_command=m.t_command,
             t_lock_b=b.t_lock, t_slip_b=b.t_slip, t_lock_h=h.t_lock, t_slip_h=h.t_slip,
             n_lock_b=float(b.n_lock), n_lock_h=float(h.n_lock), n_events=float(m.n_events),
-        )), dtype=float)
+        ))
 
     # -- events ----------------------------------------------------------------------------
     def event_functions(self, u_of_t):
+        """The current modes' event functions, built once per mode (they read the inputs of
+        the integration under way, `u_of_t`, through the model)."""
+        self._u_of_t = u_of_t
+        if self._event_list is None:
+            self._event_list = self._mode_events()
+        self._events = self._event_list[0]
+        return self._event_list[1]
+
+    def _mode_events(self) -> tuple[list, list]:
+        """(events, functions) of the current modes: a sliding element's zero speed, the single
+        locked element's break-free either way, the end of the rest when all are locked, the
+        command edge and the power law's kinks. Each function costs one `_frictions` call at
+        most (no mode decision)."""
         events, funcs = [], []
-        G, _ = self._geometry()
 
         def add(event, g, direction):
             g.terminal, g.direction = True, direction
             events.append(event)
             funcs.append(g)
 
-        locked = self._lock_set()
-        if len(locked) == 3:  # all at rest: the feasible interval of F_a closes
-            add(BREAK_REST_EVENT, lambda t, x: self._solve(t, u_of_t(t))[3], -1)
-        for k in ELEMENTS:
-            direction = self.modes.elements[k].direction
-            if direction is LOCKED:
-                if len(locked) == 1:
-                    def g_fwd(t, x, k=k):  # F_k -> -C_k: breaks free forwards
-                        _, F, C, _ = self._solve(t, u_of_t(t))
-                        return C[k] + F[k]
+        def frictions(t):
+            return self._frictions(t, self._u_of_t(t))
 
-                    def g_bwd(t, x, k=k):  # F_k -> +C_k: breaks free backwards
-                        _, F, C, _ = self._solve(t, u_of_t(t))
-                        return C[k] - F[k]
+        lock = self._lock
+        if lock == ALL_LOCKED:  # all at rest: the feasible interval of F_a closes
+            add(BREAK_REST_EVENT, lambda t, x: frictions(t)[6], -1)
+        for i, k in enumerate(ELEMENTS):
+            sign = self._signs_now[i]
+            if not sign:
+                if lock == i:
+                    def g_fwd(t, x, i=i):  # F_k -> -C_k: breaks free forwards
+                        F = frictions(t)
+                        return F[3 + i] + F[i]
+
+                    def g_bwd(t, x, i=i):  # F_k -> +C_k: breaks free backwards
+                        F = frictions(t)
+                        return F[3 + i] - F[i]
 
                     add(SLIP_EVENTS[k, Direction.FORWARD], g_fwd, -1)
                     add(SLIP_EVENTS[k, Direction.BACKWARD], g_bwd, -1)
             else:  # w_k = G_k . (w_b, w_h) falls to zero
-                add(ZERO_EVENTS[k], lambda t, x, gk=G[k]: float(gk @ x[X.w_b:X.w_h + 1]),
-                    -direction.sign)
+                g_b, g_h = self._G[i]
+                add(ZERO_EVENTS[k], lambda t, x, g_b=g_b, g_h=g_h: g_b * x[X.w_b] + g_h * x[X.w_h],
+                    -sign)
         sign = 1.0 if self.modes.command == 0 else -1.0
         i_cmd = self.IN.command
-        add(COMMAND_EVENT, lambda t, x: sign * (u_of_t(t)[i_cmd] - 0.5), 1)
+        add(COMMAND_EVENT, lambda t, x: sign * (self._u_of_t(t)[i_cmd] - 0.5), 1)
         for tb in self._breakpoints():
             add(Event(EventKind.TIME, time=tb), lambda t, x, tb=tb: t - tb, 1)
-        self._events = events
-        return funcs
+        return events, funcs
 
     def on_event(self, t, x, u, index):
         event = self._events[index]
-        x = np.array(x, dtype=float)
+        x = list(x)
         modes, elements = self.modes, self.modes.elements
         modes.t_last = float(t)
         if event.kind is EventKind.TIME:
+            self._mode_changed()  # the kink is passed: the next integration has no event at it
             return x
         modes.n_events += 1
         before = self._signs()
@@ -645,13 +742,13 @@ class PlanetaryClutchDrive(PhysicsModel):
             if not self._holds(t, u):
                 self._choose_modes(t, u, self._lock_set(), shrink=1.0 - 1e-9)
         self._record(t, before)
+        self._mode_changed()
         return self._zero_speeds(x)
 
     def advance(self, t0, x0, h, u_of_t, rtol, atol):
-        x = np.array(x0, dtype=float)
         if h <= 0.0:
-            return x
-        x = self.on_input_change(t0, x, u_of_t(t0))
+            return list(x0)
+        x = self.on_input_change(t0, x0, u_of_t(t0))
         return super().advance(t0, x, h, u_of_t, rtol, atol)
 
     # -- steady states ---------------------------------------------------------------------
