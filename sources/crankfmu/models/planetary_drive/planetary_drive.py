@@ -1,7 +1,8 @@
 """Planetary drive of a crank press with friction brakes on the ring and the carrier (seed
 planetary_drive_friction_clutch, eq. (1)-(10); MODELS.md section 3): three coupled Coulomb
 elements that lock and break free, brake laws, the four periods, a carrier port for a press.
-Equations, modes, events, variables and tests: the model card README.md in this folder.
+Equations, modes, events, variables, tests and the exact step (held inputs, exponential laws):
+the model card README.md in this folder.
 """
 from __future__ import annotations
 
@@ -14,7 +15,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...runtime.model import Effect, ParameterError, PhysicsModel, Variable, name_indices
+from ...runtime.closed_form import phi_functions
+from ...runtime.dopri import EPS
+from ...runtime.model import (Effect, InputPolynomial, IntegrationError, ParameterError,
+                              PhysicsModel, Variable, name_indices)
+from ...runtime.roots import brentq
 
 MEMBERS = ("b", "h")      # braked members
 ELEMENTS = ("a", "b", "h")  # friction elements: sun resistance, ring and carrier brakes
@@ -127,6 +132,37 @@ ZERO_EVENTS = {k: Event(EventKind.ZERO, k) for k in ELEMENTS}
 SLIP_EVENTS = {(k, d): Event(EventKind.SLIP, k, d) for k in ELEMENTS
                for d in (Direction.FORWARD, Direction.BACKWARD)}
 
+# The exact step (`_advance_exactly`) looks for sign changes of the event functions at samples
+# EVENT_SAMPLE/rate apart while the fastest brake decay e^(-rate s) lasts (DECAYED/rate:
+# e^-40 = 4e-18), then at the step's end: after the decays every event function is linear or
+# constant in time (one zero at most).
+EVENT_SAMPLE, DECAYED = 0.1, 40.0
+_INTEGRALS: dict = {}  # (rate, span) -> exponential_integrals: fixed steps repeat them
+
+
+def exponential_integrals(rate: float, span: float) -> tuple[float, float, float]:
+    """(E1, E2, J1) of the decay e^(-rate s) over [0, span]: E1 = int e^(-rate s) ds,
+    E2 = int E1(s) ds, J1 = int s e^(-rate s) ds. From the phi-functions, E1 = span phi_1(z),
+    E2 = span^2 phi_2(z) with z = -rate span, which do not cancel for a small rate span (rate 0:
+    span, span^2/2, span^2/2)."""
+    value = _INTEGRALS.get((rate, span))
+    if value is None:
+        phi_1, phi_2 = phi_functions(-rate * span, 2)
+        E1, E2 = span * phi_1, span * span * phi_2
+        value = (E1, E2, span * E1 - E2)
+        if len(_INTEGRALS) > 1024:  # event location and variable steps: keep it small
+            _INTEGRALS.clear()
+        _INTEGRALS[(rate, span)] = value
+    return value
+
+
+def decay_product(rate: float, other: float, span: float, E1: float, J1: float) -> float:
+    """int_0^span e^(-rate s) E1(other, s) ds, E1(other, s) = int_0^s e^(-other r) dr: a decay
+    times the speed another decay gives; E1, J1: exponential_integrals(rate, span)'s."""
+    if other == 0.0:  # E1(0, s) = s
+        return J1
+    return (E1 - exponential_integrals(rate + other, span)[0]) / other
+
 
 class PlanetaryClutchDrive(PhysicsModel):
     model_name = "PlanetaryClutchDrive"
@@ -134,8 +170,9 @@ class PlanetaryClutchDrive(PhysicsModel):
                    "working stroke, stopping, idle; stick-slip locking")
     seed = "planetary_drive_friction_clutch.txt, eq. (1)-(10)"
     integrator = "DOP853"
-    # advance() = on_input_change at the step start + the base event loop (the composed
-    # reference does the same at every restart)
+    # advance() = on_input_change at the step start + the base event loop, on the exact solution
+    # of derivatives() where it exists (held inputs, exponential laws): the composed reference
+    # does the same at every restart, integrating derivatives()
     advance_follows_contract = True
 
     parameters = (
@@ -299,12 +336,13 @@ class PlanetaryClutchDrive(PhysicsModel):
         """Derive from `modes` what the step path reads, after every change of the discrete
         state: the elements' signs (a tuple of ints), the lock (NO_LOCK, an element's index or
         ALL_LOCKED), the two brake laws as functions of time; and forget what belonged to the
-        old modes (the mass map, the event functions)."""
+        old modes (the mass map, the last friction torques, the event functions)."""
         elements = self.modes.elements
         self._signs_now = tuple(elements[k].direction.sign for k in ELEMENTS)
         locked = [i for i, s in enumerate(self._signs_now) if not s]
         self._lock = NO_LOCK if not locked else locked[0] if len(locked) == 1 else ALL_LOCKED
-        self._torque_b, self._torque_h = self._brake_law("b"), self._brake_law("h")
+        self._torque_b, self._decay_b = self._brake_law("b")
+        self._torque_h, self._decay_h = self._brake_law("h")
         self._map_key = self._frictions_key = None
         self._event_list = None
 
@@ -314,28 +352,29 @@ class PlanetaryClutchDrive(PhysicsModel):
         return self._laws[k]
 
     def _brake_law(self, k: str):
-        """M_tk(t), brake k's torque capacity as a function of time t, from its law and its
-        state at the last command edge (t0, M0). Built once per edge: the right-hand side
-        calls it, so the branches on the law are taken here, not in every call."""
+        """(M_tk, decay): brake k's torque capacity as a function of time t, from its law and
+        its state at the last command edge (t0, M0); and, unless it follows the power law, the
+        same law as decay = (P, R0, rate, t0): M_tk(t) = P + R0 e^(-rate (t - t0)), t >= t0
+        (engaging: P = M_p, R0 = M0 - M_p, rate = alpha; releasing: P = 0, R0 = M0, rate =
+        beta; at its end value: P = M0, R0 = rate = 0). Built once per edge: the right-hand
+        side calls M_tk, so the branches on the law are taken here, not in every call."""
         brake = self.modes.brakes[k]
         engaging, t0, M0 = brake.engaging, brake.t0, brake.M0
         Mp, alpha, beta, tc, tr, z = self._law(k)
         # tau = t - t0 >= 0 written as a conditional expression: max() costs as much as exp()
         if (engaging and M0 == Mp) or (not engaging and M0 == 0.0):
-            return lambda t: M0  # at the law's end value already
+            return (lambda t: M0), (M0, 0.0, 0.0, t0)  # at the law's end value already
         if self._power and engaging:
             rise = Mp - M0
-            return lambda t: M0 + rise * min((t - t0 if t > t0 else 0.0) / tc, 1.0) ** z
+            return (lambda t: M0 + rise * min((t - t0 if t > t0 else 0.0) / tc, 1.0) ** z), None
         if self._power:
-            return lambda t: M0 * (1.0 - min((t - t0 if t > t0 else 0.0) / tr, 1.0)) ** z
-        if engaging:
-            gap = Mp - M0
-            return lambda t: Mp - gap * exp(-alpha * (t - t0 if t > t0 else 0.0))
-        return lambda t: M0 * exp(-beta * (t - t0 if t > t0 else 0.0))
+            return (lambda t: M0 * (1.0 - min((t - t0 if t > t0 else 0.0) / tr, 1.0)) ** z), None
+        P, R0, rate = (Mp, M0 - Mp, alpha) if engaging else (0.0, M0, beta)
+        return (lambda t: P + R0 * exp(-rate * (t - t0 if t > t0 else 0.0))), (P, R0, rate, t0)
 
     def brake_torque(self, k: str, t: float) -> float:
         """Torque capacity M_tk(t) of brake k from its law and the last command edge."""
-        return self._brake_law(k)(t)
+        return self._brake_law(k)[0](t)
 
     def _breakpoints(self) -> list[float]:
         """Kinks of the power law (t0 + t_c, t0 + t_r) after the last discrete update."""
@@ -352,7 +391,7 @@ class PlanetaryClutchDrive(PhysicsModel):
                     out.append(tb)
         return out
 
-    # -- mechanics: plain floats (the right-hand side runs ~7 times per step) ----------------
+    # -- mechanics: plain floats (outputs, event functions, the integrator's right-hand side) --
     def _mass(self, sun_J: float, flange_J: float) -> tuple[float, float, float]:
         """(M_bb, M_bh, M_hh) of the mass matrix M of v = (w_b, w_h) (model card section 2)."""
         p = self.p
@@ -746,10 +785,125 @@ class PlanetaryClutchDrive(PhysicsModel):
         return self._zero_speeds(x)
 
     def advance(self, t0, x0, h, u_of_t, rtol, atol):
+        """on_input_change at t0, then the event loop: in closed form (`_advance_exactly`)
+        when the inputs are held over the step and both brakes follow the exponential law
+        (every shipped scene), else with the runtime's integrator on `derivatives`."""
         if h <= 0.0:
             return list(x0)
         x = self.on_input_change(t0, x0, u_of_t(t0))
-        return super().advance(t0, x, h, u_of_t, rtol, atol)
+        if self.solver == "scipy" or not isinstance(u_of_t, InputPolynomial) or \
+                u_of_t.moving or self._decay_b is None or self._decay_h is None:
+            return super().advance(t0, x, h, u_of_t, rtol, atol)
+        return self._advance_exactly(t0, x, h, u_of_t, rtol, atol)
+
+    # -- the exact step (held inputs, exponential laws) --------------------------------------
+    def _advance_exactly(self, t0, x, h, u_of_t, rtol, atol):
+        """The base class's event loop with the exact solution (`_trajectory`) in place of an
+        integrator: from each restart, the earliest event of the current modes within the step
+        (`_first_event`), on_event there, and on in the new modes."""
+        self._check_inputs(t0, u_of_t)
+        u = u_of_t(t0)
+        t, t_end = t0, t0 + h
+        for _ in range(self.max_events_per_step):
+            if self._decay_b is None or self._decay_h is None:  # a power law began mid-step
+                return PhysicsModel.advance(self, t, x, t_end - t, u_of_t, rtol, atol)
+            span = h if t == t0 else t_end - t  # h itself: the integrals are cached per span
+            state = self._trajectory(t, x, u)
+            x_end = state(span)
+            hit = self._first_event(self.event_functions(u_of_t), t, x, span, state, x_end)
+            if hit is None:
+                return x_end
+            sigma, index = hit
+            t_event = t_end if sigma == span else t + sigma
+            x = self.on_event(t_event, state(sigma), u, index)
+            t = t_event
+            if t >= t_end:
+                return x
+        raise IntegrationError(f"{self.model_name}: more than {self.max_events_per_step} "
+                               f"events in one step at t = {t:.9g} s")
+
+    def _trajectory(self, t_a, x_a, u):
+        """The solution of `derivatives` from (t_a, x_a) in the current modes with the inputs
+        u held, as a function of sigma = t - t_a (model card section 11). With the brake
+        torques M_tk(t_a + sigma) = P_k + R_k e^(-l_k sigma), Qt is affine in them (the sliding
+        member k adds -s_k M_tk G_k, G_b = (1, 0), G_h = (0, 1)), so the accelerations are
+        v' = K Qt = c + d_b e^(-l_b sigma) + d_h e^(-l_h sigma) and every state is an integral
+        of exponentials and polynomials in sigma."""
+        phi_b, phi_h, w_b, w_h, E_b, E_h, E_r, W_s, W_f = x_a
+        sun_tau, sun_J, flange_tau, flange_J = self._ports(u)
+        pr, q, M_ca, M_cb, M_ch = self._constants
+        s_a, s_b, s_h = signs = self._signs_now
+        K_bb, K_bh, K_hb, K_hh = self._map(sun_J, flange_J)[:4]
+        P_b, R_b, l_b = _decay_from(self._decay_b, t_a)
+        P_h, R_h, l_h = _decay_from(self._decay_h, t_a)
+        Q_b, Q_h = self._forces(u, signs, P_b, P_h)
+        c_b, c_h = K_bb * Q_b + K_bh * Q_h, K_hb * Q_b + K_hh * Q_h
+        r_b, r_h = -s_b * R_b, -s_h * R_h
+        db_b, db_h, dh_b, dh_h = K_bb * r_b, K_hb * r_b, K_bh * r_h, K_hh * r_h
+
+        def brake_energy(s_k, P_k, R_k, l_k, E1_k, J1_k, w_k, c_k, db_k, dh_k, dphi_k, sigma):
+            """int M_tk s_k w_k = s_k (P_k dphi_k + R_k int e^(-l_k s) w_k(s) ds)."""
+            if not (s_k and R_k):
+                return s_k * P_k * dphi_k
+            decayed = w_k * E1_k + c_k * J1_k + \
+                db_k * decay_product(l_k, l_b, sigma, E1_k, J1_k) + \
+                dh_k * decay_product(l_k, l_h, sigma, E1_k, J1_k)
+            return s_k * (P_k * dphi_k + R_k * decayed)
+
+        def state(sigma):
+            E1_b, E2_b, J1_b = exponential_integrals(l_b, sigma)
+            E1_h, E2_h, J1_h = exponential_integrals(l_h, sigma)
+            half_square = 0.5 * sigma * sigma
+            dphi_b = w_b * sigma + c_b * half_square + db_b * E2_b + dh_b * E2_h
+            dphi_h = w_h * sigma + c_h * half_square + db_h * E2_b + dh_h * E2_h
+            dphi_a = -pr * dphi_b + q * dphi_h if s_a else 0.0
+            return [phi_b + dphi_b, phi_h + dphi_h,
+                    w_b + c_b * sigma + db_b * E1_b + dh_b * E1_h,
+                    w_h + c_h * sigma + db_h * E1_b + dh_h * E1_h,
+                    E_b + brake_energy(s_b, P_b, R_b, l_b, E1_b, J1_b, w_b, c_b, db_b, dh_b,
+                                       dphi_b, sigma),
+                    E_h + brake_energy(s_h, P_h, R_h, l_h, E1_h, J1_h, w_h, c_h, db_h, dh_h,
+                                       dphi_h, sigma),
+                    E_r + M_ca * s_a * dphi_a + M_cb * s_b * dphi_b + M_ch * s_h * dphi_h,
+                    W_s + sun_tau * dphi_a, W_f + flange_tau * dphi_h]
+        return state
+
+    def _first_event(self, events, t_a, x_a, span, state, x_end):
+        """(sigma, index) of the earliest event in [t_a, t_a + span] by the rule of the
+        runtime's integrators (solve_ivp's: a sign change in the function's direction between
+        two samples, a zero at either counts; located with Brent's method to 4 eps), or None.
+        The samples: see EVENT_SAMPLE (in the shipped scenes, rate x step <= 0.04: the step's
+        ends only, where the Dormand-Prince checked its one step per communication step)."""
+        rate, decaying = 0.0, 0.0  # the fastest decay still on, how long the decays last
+        for _, R0, l_k, t0 in (self._decay_b, self._decay_h):
+            if R0 and t0 + DECAYED / l_k > t_a:
+                rate, decaying = max(rate, l_k), max(decaying, t0 + DECAYED / l_k - t_a)
+        decaying = min(span, decaying)
+        pieces = math.ceil(rate * decaying / EVENT_SAMPLE)
+        samples = [decaying * k / pieces for k in range(1, pieces)]
+        if 0.0 < decaying < span:
+            samples.append(decaying)
+        samples.append(span)
+        sigma_old, g_old = 0.0, [g(t_a, x_a) for g in events]
+        for sigma in samples:
+            x_new = x_end if sigma == span else state(sigma)
+            g_new = [g(t_a + sigma, x_new) for g in events]
+            roots = []
+            for i, (g, a, b) in enumerate(zip(events, g_old, g_new)):
+                if not ((a <= 0.0 <= b and g.direction >= 0) or
+                        (a >= 0.0 >= b and g.direction <= 0)):
+                    continue
+                if a == 0.0:
+                    roots.append((sigma_old, i))
+                elif b == 0.0:
+                    roots.append((sigma, i))
+                else:
+                    roots.append((brentq(lambda s, g=g: g(t_a + s, state(s)), sigma_old, sigma,
+                                         xtol=4 * EPS, rtol=4 * EPS), i))
+            if roots:
+                return min(roots)
+            sigma_old, g_old = sigma, g_new
+        return None
 
     # -- steady states ---------------------------------------------------------------------
     def steady_sun_torque(self, period: int, flange_tau: float = 0.0) -> float:
@@ -774,6 +928,13 @@ class PlanetaryClutchDrive(PhysicsModel):
         if period == 1:
             return -(1 + pr) * M_A - flange_tau
         return pr * M_A
+
+
+def _decay_from(decay, t_a: float) -> tuple[float, float, float]:
+    """(P, R, rate) with M_t(t_a + sigma) = P + R e^(-rate sigma), from a brake law's decay
+    (P, R0, rate, t0)."""
+    P, R0, rate, t0 = decay
+    return P, R0 * exp(-rate * (t_a - t0 if t_a > t0 else 0.0)), rate
 
 
 def steady_state(drive: PlanetaryClutchDrive, motor, period: int,
