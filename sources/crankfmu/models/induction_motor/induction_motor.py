@@ -54,6 +54,15 @@ class InductionMotor(PhysicsModel):
             raise ParameterError(self.model_name, "lambda_k", p.lambda_k,
                                  "> 1 (the breakdown torque exceeds the rated torque)")
 
+    def __init__(self, parameters=None, effects=None):
+        super().__init__(parameters, effects)
+        self._derive()
+
+    def _derive(self) -> None:
+        """(w_s, M_k, s_k, linear law?) once per parameter set, for `torque` (again in
+        initial_state, so a host that sets parameters on self.p after construction is safe)."""
+        self._characteristic = (self.w_s, self.M_k, self.s_k, self.on("linear_law"))
+
     # -- nameplate-derived constants -----------------------------------------------------
     @property
     def w_s(self) -> float:
@@ -97,13 +106,20 @@ class InductionMotor(PhysicsModel):
 
     # -- the characteristic ----------------------------------------------------------------
     def torque(self, w):
-        """Air-gap torque at shaft speed w (scalar or array) for the enabled law."""
-        s = 1.0 - np.asarray(w, dtype=float) / self.w_s
-        if self.on("linear_law"):
-            M = 2.0 * self.M_k * s / self.s_k
-        else:
-            M = 2.0 * self.M_k * s * self.s_k / (s * s + self.s_k ** 2)
-        return float(M) if np.ndim(M) == 0 else M
+        """Air-gap torque at shaft speed w (scalar or array) for the enabled law. A float
+        stays a float (the FMU's step: no numpy for one number), anything else goes through
+        numpy elementwise; the same formula either way."""
+        if not isinstance(w, float):
+            M = self._torque(np.asarray(w, dtype=float))
+            return float(M) if np.ndim(M) == 0 else M
+        return self._torque(w)
+
+    def _torque(self, w):
+        w_s, M_k, s_k, linear = self._characteristic
+        s = 1.0 - w / w_s
+        if linear:
+            return 2.0 * M_k * s / s_k
+        return 2.0 * M_k * s * s_k / (s * s + s_k ** 2)
 
     def dtorque_dw(self, w: float) -> float:
         """dM/dw at speed w (negative on the stable branch)."""
@@ -135,12 +151,13 @@ class InductionMotor(PhysicsModel):
         return ()
 
     def initial_state(self, u):
-        return np.zeros(0)
+        self._derive()
+        return []
 
     def derivatives(self, t, x, u):
-        return np.zeros(0)
+        return ()
 
     def output_values(self, t, x, u):
         w = float(u[self.IN.flange_w])
         M = self.torque(w)
-        return np.array([M, self.J_shaft, 1.0 - w / self.w_s, M * w])
+        return [M, self.J_shaft, 1.0 - w / self._characteristic[0], M * w]
