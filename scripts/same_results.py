@@ -16,11 +16,13 @@ exceeded or a scene's rows or columns differ.
 from __future__ import annotations
 
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "sources"))  # this tree's crankfmu, whatever is installed
 GLOBAL_FACTOR = 100.0
 PULSE_SAMPLES = {"P", "T"}
 EVENT_TIMES = {"t_lock_b", "t_slip_b", "t_lock_h", "t_slip_h", "t_command"}
@@ -93,10 +95,9 @@ def main(argv=None) -> int:
             _run(path, folder / f"{path.stem}.csv")
             print(f"saved {path.stem}")
         return 0
-    fresh = folder / "fresh"
-    fresh.mkdir(exist_ok=True)
-    results = [compare_scene(p, folder / f"{p.stem}.csv", fresh / f"{p.stem}.csv")
-               for p in _scenes()]
+    with tempfile.TemporaryDirectory() as fresh:  # DIR is only read: two checks may share it
+        results = [compare_scene(p, folder / f"{p.stem}.csv", Path(fresh) / f"{p.stem}.csv")
+                   for p in _scenes()]
     print(f"\n{sum(results)} of {len(results)} scenes within their bounds")
     return 0 if all(results) else 1
 
