@@ -23,7 +23,6 @@ harmonic L_1 of the disturbance moment and the constant inertia J0.
 from __future__ import annotations
 
 import csv
-import logging
 from dataclasses import replace
 from pathlib import Path
 
@@ -32,7 +31,6 @@ import numpy as np
 CASES = ("base link, gravity on", "base link, gravity off", "counterweight on the crank")
 DEFAULT_MASSES = tuple(float(m) for m in range(0, 401, 20))   # kg: the shipped 20 and 200 on it
 
-_progress = logging.getLogger("crankfmu").info
 
 
 def scene_drive(scene):
@@ -72,7 +70,7 @@ def _first_approximation(press, motor, u0: float, lag: bool, crank_mass):
 def mass_sweep(scene, masses=DEFAULT_MASSES, cases=CASES) -> dict:
     """{case: {"mass", "delta_sim", "delta_1", "L1", "J0"}} (arrays over `masses` [kg]; delta
     [1], L1 [N m], J0 [kg m^2]) plus "lag" and "m2_scene" [kg]. Progress on stderr."""
-    from .papers import press_steady_revolution
+    from .papers import press_steady_revolution, progress
 
     from .flywheel import eq28_conventions
 
@@ -81,7 +79,7 @@ def mass_sweep(scene, masses=DEFAULT_MASSES, cases=CASES) -> dict:
     out = {"lag": lag, "m2_scene": press.p.m2, "r": press.p.r,
            "J_Mx": eq28_conventions(press, motor, u0)["mean"]["J_Mx"]}
     for case in cases:
-        _progress(f"analyze press: {case}, {masses.size} masses")
+        progress(f"analyze press: {case}, {masses.size} masses")
         rows = []
         for m in masses:
             p, cm = _case_models(press, case, float(m))

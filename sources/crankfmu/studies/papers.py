@@ -40,7 +40,7 @@ import numpy as np
 from ..system.scene import SceneError
 
 TWO_PI = 2.0 * math.pi
-_progress = logging.getLogger("crankfmu").info   # notes on stderr (-q hides them)
+progress = logging.getLogger("crankfmu").info   # notes on stderr (-q hides them)
 A_FIGURE = 0.08  # m: base-link offset drawn in press_base_link.png (triangle height, ~ l/3)
 
 
@@ -432,7 +432,7 @@ def figure_flywheel(d: dict):
 
 def press_figures(scene, out_dir: Path) -> list[Path]:
     press, m_static, m_lag, u0 = press_models(scene)
-    _progress("analyze press: dynamic errors, base-link offset, flywheel")
+    progress("analyze press: dynamic errors, base-link offset, flywheel")
     figures = {"press_dynamic_error.png": figure_dynamic_error(
                    dynamic_error_data(press, m_static, m_lag, u0)),
                "press_base_link.png": figure_base_link(base_link_data(press)),
@@ -529,7 +529,7 @@ def impact_stiffness_data(scene, k_n_values=(40e6, 80e6, 160e6)) -> list[dict]:
     from . import rocker_analysis as ra
 
     out = []
-    _progress(f"analyze impact: the figures, {len(k_n_values) + 1} impacts")
+    progress(f"analyze impact: the figures, {len(k_n_values) + 1} impacts")
     for kn in k_n_values:
         d = impact_data(scene, kn)
         d["lobe_1"] = ra.opposite_lobe(d["first"].T(np.linspace(0.0, d["first"].tau, 2001)))
@@ -788,7 +788,7 @@ def planetary_data(scene_path) -> dict:
     from ..system.scene import InputSignal
 
     scene, d, c0, c1, w_idle = planetary_setup(scene_path)
-    _progress("analyze planetary: the four periods, engagement times, brake torques (~10 s)")
+    progress("analyze planetary: the four periods, engagement times, brake torques (~10 s)")
     four = prepare_scene(scene, stop_time=T_STOP)
     four.inputs["drive.command"] = InputSignal("drive.command", [0.0, T_COMMAND_ON,
                                                T_COMMAND_OFF], [0.0, 1.0, 0.0], "step")

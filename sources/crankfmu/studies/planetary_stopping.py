@@ -1,5 +1,5 @@
 """Seed 001: "stopping at top dead centre is the design case" (`crankfmu analyze stopping`;
-docs/planetary_stopping.md).
+docs/papers.md, section 3).
 
 The paper: the stop may begin in any position of the main shaft; "obviously" a stop at the top
 dead centre (TDC, the end of the slider's idle return stroke) takes the most energy to
@@ -15,13 +15,12 @@ crank has turned a given angle past TDC (on the step grid: within one step of cr
 < 1 deg; the angle actually reached is reported). Per angle: the stop duration (command to the
 carrier's lock), the energy each brake absorbs over it, the speeds and the drive's kinetic
 energy at the command, the crank's travel until it stands. Each stop is a co-simulation of the
-scene's FMUs with its master (tests/test_planetary_stopping.py compares two angles with the
+scene's FMUs with its master (tests/test_papers_claims.py compares two angles with the
 monolithic rigid reference).
 """
 from __future__ import annotations
 
 import csv
-import logging
 import math
 from pathlib import Path
 
@@ -39,7 +38,6 @@ NEEDS = ("press.phi", "press.w_crank", "drive.w_a", "drive.w_h", "drive.E_kin",
          "drive.t_lock_h", "drive.n_lock_h")
 TDC_BAND = 5.0         # deg: the sweep's angle nearest 360 deg counts as the TDC case within it
 
-_progress = logging.getLogger("crankfmu").info
 
 
 def _setup(scene_path):
@@ -82,10 +80,12 @@ def stopping_sweep(scene_path, angles=DEFAULT_ANGLES) -> dict:
     angle [deg, reached], t_command [s], w_crank, w_a [rad/s], E_kin [J] at the command;
     t_stop [s] (command to the carrier's lock), E_h, E_b [J] absorbed by the carrier and the
     ring brake over the stop, travel [deg] of the crank until it stands; and the scene's name."""
+    from .papers import progress
+
     scene, t_on, phi_tdc = _setup(scene_path)
     step = scene.master.step
     angles = np.asarray(sorted(angles), dtype=float)
-    _progress(f"analyze stopping: the stroke without a stop, then {angles.size} stops")
+    progress(f"analyze stopping: the stroke without a stop, then {angles.size} stops")
     free = _run(scene, t_on, None, t_on + FREE_RUN)
     after_tdc = np.degrees(free["press.phi"] - phi_tdc)
     if free["drive.n_lock_b"][-1] < 1:
@@ -110,7 +110,7 @@ def stopping_sweep(scene_path, angles=DEFAULT_ANGLES) -> dict:
                      v["drive.E_brake_h"][-1] - v["drive.E_brake_h"][k],
                      v["drive.E_brake_b"][-1] - v["drive.E_brake_b"][k],
                      np.degrees(v["press.phi"][-1] - v["press.phi"][k])))
-        _progress(f"  stop {n}/{angles.size} at {angle:g} deg: {rows[-1][5]:.4f} s")
+        progress(f"  stop {n}/{angles.size} at {angle:g} deg: {rows[-1][5]:.4f} s")
     rows = np.array(rows)
     keys = ("angle", "t_command", "w_crank", "w_a", "E_kin", "t_stop", "E_h", "E_b", "travel")
     out = {k: rows[:, j] for j, k in enumerate(keys)}
