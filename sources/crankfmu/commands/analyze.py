@@ -176,6 +176,7 @@ def run_press(args) -> int:
 
 def run_impact(args) -> int:
     from ..studies import rocker_analysis as ra
+    from ..studies.papers import progress
 
     scene = _scene_file(args.scene) if args.plot else None   # before the table is computed
     out = _out_dir(args.out, "impact")
@@ -183,12 +184,14 @@ def run_impact(args) -> int:
                (("J", "J"), ("m", "m"), ("r", "r"), ("R_c", "r_c"), ("d", "d"), ("E", "E"),
                 ("rho", "rho"), ("nu", "nu"), ("V0", "v0")) if getattr(args, dest) is not None}
     base = ra.RockerData(**changes)
+    progress(f"analyze impact: the table, {len(args.s_factor) * len(args.k_n)} row(s)")
     rows = ra.impact_table(base, args.s_factor, args.k_n)
     print(ra.format_impact_table(rows))
     print()
     print(ra.format_claims(ra.claims(rows)))
     written = [ra.write_impact_table(rows, out / "impact_table.csv")]
     if args.hertz_peak:
+        progress("analyze impact: the support stiffness on the Hertz peak")
         peaks = ra.hertz_peak_table(base, args.s_factor, args.k_n)
         print()
         print(ra.format_hertz_peak_table(peaks))
@@ -251,8 +254,10 @@ def run_mill_stand(args) -> int:
 def run_flywheel(args) -> int:
     from ..system.load import load_scene
     from ..studies.flywheel import report
+    from ..studies.papers import progress
 
     scene = load_scene(_scene_file(args.scene))
+    progress("analyze flywheel: the first approximation at each flywheel")
     text, written = report(args.csv, scene, _out_dir(args.out, "flywheel"), args.plot)
     print(text)
     _written(written)
