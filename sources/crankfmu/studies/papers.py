@@ -341,7 +341,8 @@ def gear_moment_ratio(rev: PressRevolution, drive) -> float:
     the crank angle) of the moment through the gear, M_p = i M_D - J_D phi'' with
     i M_D = D - s phi', phi'' = phi' dphi'/dphi (spectral derivative on the equally spaced
     angles), over the first harmonic L_1 of the disturbance. The time-domain counterpart of
-    sqrt(23)/(26) (tests/test_press_physics.py checks it at three flywheels)."""
+    sqrt(23)/(26) (tests/test_press_physics.py computes it independently from its own
+    steady state; tests/test_papers_claims.py compares it with both readings of (26))."""
     from . import press_analysis as pa
 
     n = rev.theta.size
