@@ -43,11 +43,11 @@ def test_errors_exit_2_with_the_reason(tmp_path, fmu_dir):
     assert done.returncode == 2 and "no such scene file" in done.stderr
 
 
-def test_structure_and_analyze_commands():
+def test_structure_and_analyze_commands(tmp_path):
     done = crankfmu("structure", SCENARIOS / "mechanisms" / "stand_drive_p1.toml", "--json")
     assert done.returncode == 0, done.stderr
     result = json.loads(done.stdout)
     assert (result["W_chebyshev"], result["q_malyshev"], result["q_ozol"]) == (2, 3, 3)
-    done = crankfmu("analyze", "impact", "--k-n", 8e7, "--S-factor", 1.1)
+    done = crankfmu("analyze", "impact", "--k-n", 8e7, "--s-factor", 1.1, "--out", tmp_path)
     assert done.returncode == 0, done.stderr
     assert "905.3" in done.stdout  # Pm [kN] of the first approximation (see test_rocker_impact)

@@ -24,8 +24,9 @@ from crankfmu.models.catalog import make_physics
 EFFECTS = ["support_compliance", "hertz_contact", "hertz_support"]
 
 
-def independent_peaks(model):
-    """(P peak, |T| peak) of the first impact from the equations written out here."""
+def independent_peaks(model, c0: float | None = None):
+    """(P peak, |T| peak) of the first impact from the equations written out here: the Hertzian
+    bearing, or with `c0` [N/m] the linear one T = c0 u0 (tests/test_papers_claims.py)."""
     p, data = model.p, model.data()
     K, Z, kappa = data.K, data.Z, (p.k_n / 1.25) ** 1.5
     mass = np.array([[p.m, p.m * p.r], [p.m * p.r, p.J]])
@@ -34,7 +35,7 @@ def independent_peaks(model):
         u0, v0, th, om, w = y
         delta = u0 + p.S * th - w
         P = K * delta ** 1.5 if delta > 0.0 else 0.0
-        T = kappa * math.copysign(abs(u0) ** 1.5, u0)
+        T = kappa * math.copysign(abs(u0) ** 1.5, u0) if c0 is None else c0 * u0
         return P, T
 
     def rhs(t, y):

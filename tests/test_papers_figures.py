@@ -1,6 +1,8 @@
-"""`crankfmu analyze press|impact --plot DIR`: the papers' figures are written, and every
-analytic curve they draw is checked against the simulation drawn beside it
-(crankfmu/studies/papers.py). A few seconds each.
+"""`crankfmu analyze SUBJECT --out DIR --plot`: the papers' tables and figures are written
+(through the command's parser), and every analytic curve they draw is checked against the
+simulation drawn beside it (crankfmu/studies/papers.py). A few seconds each. The new analyses'
+claims (base-link mass, (28) conventions, Figs. 2-3 for three k_n, the Hertz-peak support,
+stopping angles, mobility tables) are checked in tests/test_papers_claims.py.
 """
 from __future__ import annotations
 
@@ -18,6 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PRESS_SCENE = ROOT / "scenarios" / "servo_press.toml"
 IMPACT_SCENE = ROOT / "scenarios" / "mo100_impact.toml"
 PLANETARY_SCENE = ROOT / "scenarios" / "planetary_engagement.toml"
+MECHANISMS = ROOT / "scenarios" / "mechanisms"
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 
@@ -34,8 +37,8 @@ def press_data():
 
 
 @functools.lru_cache(maxsize=None)
-def impact_data():
-    return _IMPACT_DATA(IMPACT_SCENE)
+def impact_data(k_n=None):
+    return _IMPACT_DATA(IMPACT_SCENE, k_n)
 
 
 _PLANETARY_DATA = papers.planetary_data   # the real one (the command test patches the module)
@@ -52,68 +55,154 @@ def assert_pngs(directory: Path, names) -> None:
         assert data.startswith(PNG_MAGIC) and len(data) > 10_000, name
 
 
-# -- the commands -----------------------------------------------------------------------------
-def test_analyze_press_writes_its_figures(tmp_path, capsys, monkeypatch):
-    # the curves from the cached data (the command's own computation is the same calls, on the
-    # same scene); the base link's figure is computed by the command
+# -- the commands (through the parser: --out DIR, --plot) --------------------------------------
+def test_analyze_press_writes_its_tables_and_figures(tmp_path, capsys, monkeypatch):
+    # the dynamic-error and flywheel curves from the cached data (the command's own computation
+    # is the same calls, on the same scene); the rest is computed by the command
     monkeypatch.setattr(papers, "dynamic_error_data", lambda *args: press_data()[0])
     monkeypatch.setattr(papers, "flywheel_data", lambda *args: press_data()[1])
     out = tmp_path / "figs" / "press"   # created, parents too
-    assert main(["analyze", "press", "--plot", str(out), "--scene", str(PRESS_SCENE)]) == 0
-    assert_pngs(out, ["press_dynamic_error.png", "press_base_link.png", "press_flywheel.png"])
-    assert capsys.readouterr().out.count("wrote ") == 3
+    assert main(["analyze", "press", "--out", str(out), "--plot", "--masses", "20", "200",
+                 "--scene", str(PRESS_SCENE)]) == 0
+    assert_pngs(out, ["press_dynamic_error.png", "press_base_link.png", "press_flywheel.png",
+                      "press_base_link_mass.png"])
+    text = capsys.readouterr().out
+    assert text.count("wrote ") == 6
+    assert "difference (mean - paper)/paper: -0.212 %" in text            # (28), both
+    assert "base link 20 -> 200 kg, gravity on: delta 10.07 % -> 10.34 %" in text
+    assert "base link 20 -> 200 kg, gravity off: delta 9.85 % -> 9.37 %" in text
+    assert "built-in counterweight reducing the non-uniformity: FAILS" in text
+    rows = (out / "press_base_link_mass.csv").read_text().splitlines()
+    assert rows[0].startswith("case,mass [kg],delta_sim [1]") and len(rows) == 1 + 3 * 2
+    assert (out / "press_flywheel_28.csv").read_text().count("\n") == 3
 
 
-def test_analyze_impact_keeps_its_table_and_writes_the_figure(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(papers, "impact_data", lambda scene: impact_data())  # the same call
-    assert main(["analyze", "impact", "--k-n", "80e6", "--S-factor", "1.1", "--plot",
-                 str(tmp_path), "--scene", str(IMPACT_SCENE)]) == 0
+def test_analyze_press_without_plot_writes_tables_only(tmp_path, capsys):
+    assert main(["-q", "analyze", "press", "--out", str(tmp_path), "--masses", "20",
+                 "--scene", str(PRESS_SCENE)]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["press_base_link_mass.csv",
+                                                          "press_flywheel_28.csv"]
+    assert "no verdict on the claim: the sweep needs two masses" in capsys.readouterr().out
+
+
+def test_analyze_impact_keeps_its_table_and_writes_the_figures(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(papers, "impact_data", lambda scene, k_n=None: impact_data(k_n))
+    assert main(["analyze", "impact", "--k-n", "40e6", "80e6", "160e6", "--s-factor", "1.1",
+                 "--out", str(tmp_path), "--plot", "--scene", str(IMPACT_SCENE)]) == 0
     out = capsys.readouterr().out
-    assert "Pm" in out and "wrote" in out          # the table as before, then the figure
-    assert_pngs(tmp_path, ["impact_forces.png"])
+    assert "Pm" in out and "wrote" in out          # the table as before, then the figures
+    assert "curve 2 is the sign-alternating one" in out
+    assert_pngs(tmp_path, ["impact_forces.png", "impact_stiffness.png"])
+    assert len((tmp_path / "impact_table.csv").read_text().splitlines()) == 1 + 3
 
 
-def test_analyze_planetary_writes_its_figure(tmp_path, capsys, monkeypatch):
+def test_analyze_planetary_writes_its_table_and_figure(tmp_path, capsys, monkeypatch):
     # the figure from the cached data (the command's own computation is the same call)
     monkeypatch.setattr(papers, "planetary_data", lambda scene: planetary_data())
-    assert main(["analyze", "planetary", "--plot", str(tmp_path), "--scene",
+    assert main(["analyze", "planetary", "--out", str(tmp_path), "--plot", "--scene",
                  str(PLANETARY_SCENE)]) == 0
     assert_pngs(tmp_path, ["planetary.png"])
-    assert "wrote" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "engagement (ring locks)" in out and out.count("wrote") == 2
 
 
-@pytest.mark.parametrize("subject", ["press", "impact", "planetary"])
-def test_plot_into_a_file_is_a_clear_error(tmp_path, capsys, subject):
+def test_analyze_mill_stand_draws_each_scheme_and_table(tmp_path, capsys):
+    files = [MECHANISMS / f"stand_drive_{v}.toml" for v in ("p1", "p2p3", "p4")]
+    assert main(["analyze", "mill-stand", "--out", str(tmp_path), "--plot", "--mechanisms",
+                 *map(str, files)]) == 0
+    assert_pngs(tmp_path, ["stand_drive_p1.png", "stand_drive_p2p3.png", "stand_drive_p4.png"])
+    out = capsys.readouterr().out
+    assert "redundant 3: rotation about y, rotation about z, translation along x" in out
+    assert len((tmp_path / "mobility.csv").read_text().splitlines()) == 1 + 3 * 5
+
+
+def test_analyze_hammer_and_flywheel_take_out_and_plot(tmp_path, capsys):
+    t = np.linspace(0.0, 1.0, 101)
+    csv = tmp_path / "hammer.csv"
+    cols = {"time": t, "motor.flange_tau": t, "hammer.M_load": t, "hammer.w_crank": t,
+            "hammer.n_impacts": np.floor(3 * t), "hammer.V_impact": t + 1,
+            "hammer.P_peak": t + 2, "hammer.T_peak": t, "hammer.contact": 0 * t,
+            "hammer.phi": t}
+    np.savetxt(csv, np.column_stack(list(cols.values())), delimiter=",",
+               header=",".join(f'"{k}"' for k in cols), comments="")
+    assert main(["analyze", "hammer", str(csv), "--out", str(tmp_path / "h"), "--plot"]) == 0
+    assert_pngs(tmp_path / "h", ["hammer.png"])
+    # n_impacts steps up at t = 0.34, 0.67 and 1 (the last sample, contact over): three blows
+    assert len((tmp_path / "h" / "hammer_blows.csv").read_text().splitlines()) == 1 + 3
+    sweep = tmp_path / "sweep.csv"
+    sweep.write_text("run,motor.J_flywheel,delta,status,reason,wall_seconds\n"
+                     "0,0.0,0.1007,completed,,1.0\n1,0.2,0.03,completed,,1.0\n")
+    assert main(["analyze", "flywheel", str(sweep), "--scene", str(PRESS_SCENE), "--out",
+                 str(tmp_path / "f")]) == 0
+    assert [p.name for p in (tmp_path / "f").iterdir()] == ["flywheel.csv"]
+    assert "in the paper's convention J_M0 = J1 + J_2O: J_Mx = 0.1412" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("subject", ["press", "impact", "planetary", "stopping", "mill-stand"])
+def test_out_into_a_file_is_a_clear_error(tmp_path, capsys, subject):
     target = tmp_path / "a_file.png"
     target.write_text("not a directory")
-    assert main(["analyze", subject, "--plot", str(target)]) == 2
+    assert main(["analyze", subject, "--out", str(target)]) == 2
     err = capsys.readouterr().err
-    assert f"--plot {target}: is a file" in err and "Traceback" not in err
+    assert f"--out {target}: is a file" in err and "Traceback" not in err
 
 
 def test_missing_scene_is_a_clear_error(tmp_path, capsys):
     missing = tmp_path / "nowhere.toml"
-    assert main(["analyze", "press", "--plot", str(tmp_path), "--scene", str(missing)]) == 2
+    assert main(["analyze", "press", "--out", str(tmp_path), "--scene", str(missing)]) == 2
     err = capsys.readouterr().err
     assert f"--scene {missing}: no such scene file" in err and "Traceback" not in err
 
 
 @pytest.mark.parametrize("subject, scene, needs", [
     ("press", "hammer.toml", "'press' of FMU StephensonPress (found none)"),
-    ("planetary", "servo_press.toml", "'motor' of FMU InductionMotor (found a DcServoMotor)")])
+    ("planetary", "servo_press.toml", "'motor' of FMU InductionMotor (found a DcServoMotor)"),
+    ("stopping", "servo_press.toml", "'drive' of FMU PlanetaryClutchDrive (found none)")])
 def test_scene_of_the_wrong_kind_is_a_clear_error(tmp_path, capsys, subject, scene, needs):
     path = ROOT / "scenarios" / scene
-    assert main(["analyze", subject, "--plot", str(tmp_path), "--scene", str(path)]) == 2
+    assert main(["analyze", subject, "--out", str(tmp_path), "--scene", str(path)]) == 2
     err = capsys.readouterr().err
     assert f"{path}: components." in err and needs in err and "Traceback" not in err
 
 
+@pytest.mark.parametrize("argv, says", [
+    (["press", "--masses", "-1"], "--masses -1: must be a finite number >= 0 [kg]"),
+    (["stopping", "--angles", "10"], "a stop starts from the working stroke, from the ring's "
+                                     "lock at 76.2 deg after TDC")])
+def test_bad_numbers_are_clear_errors(tmp_path, capsys, argv, says):
+    scene = {"press": PRESS_SCENE, "stopping": ROOT / "scenarios" / "conventional_press.toml"}
+    assert main(["-q", "analyze", *argv, "--out", str(tmp_path), "--scene",
+                 str(scene[argv[0]])]) == 2
+    err = capsys.readouterr().err
+    assert says in err and "Traceback" not in err
+
+
 def test_unknown_subject_is_a_usage_error(capsys):
     with pytest.raises(SystemExit) as exit_:
-        main(["analyze", "pres", "--plot", "x"])
+        main(["analyze", "pres", "--out", "x"])
     assert exit_.value.code == 2
     err = capsys.readouterr().err
     assert "invalid choice: 'pres'" in err and "Traceback" not in err
+
+
+def test_every_analyze_subcommand_follows_the_cli_convention():
+    """--out DIR (not required), --plot a flag, options spelled with hyphens, every option with
+    a help text that states a unit or is a flag, a name or a file."""
+    import argparse
+
+    from crankfmu.cli import build_parser
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    analyze = sub.choices["analyze"]
+    subjects = next(a for a in analyze._actions if isinstance(a, argparse._SubParsersAction))
+    for name, parser in subjects.choices.items():
+        actions = {a.dest: a for a in parser._actions}
+        assert not actions["out"].required and actions["out"].metavar == "DIR", name
+        assert isinstance(actions["plot"], argparse._StoreTrueAction), name
+        for a in parser._actions:
+            for option in a.option_strings:
+                assert "_" not in option, (name, option)
+            if a.option_strings and a.dest != "help":
+                assert a.help, (name, a.dest)
 
 
 # -- seed 000: the plotted curves against the simulation -------------------------------------

@@ -104,6 +104,16 @@ def test_scene_values_are_the_issues(scene):
     assert rel(drive["w_a_start"], independent) < 1e-12
 
 
+@pytest.mark.parametrize("scene", SCENES)
+def test_the_scene_says_when_its_member_locks(results, scene):
+    """The scene file's comment "... locks at X s" is the run's lock time to its three digits
+    (half a unit of the last digit: 5e-4 s), so a reader of the scene is not misled."""
+    import re
+    said = re.search(r"locks at ([0-9.]+) s", (SCENARIOS / SCENES[scene]).read_text())
+    assert said, "the scene's comment names no lock time"
+    assert abs(float(said.group(1)) - key_times(scene, results[scene, False])[1]) <= 5e-4
+
+
 # -- against the monolithic reference --------------------------------------------------------
 @pytest.mark.parametrize("scene", SCENES)
 def test_fmu_run_against_monolithic_reference(results, scene):

@@ -236,9 +236,10 @@ def test_flywheel_report_marks_eq_28(tmp_path, servo_scene):
     csv.write_text("run,motor.J_flywheel,delta,status,reason,wall_seconds\n"
                    "0,0.0,0.1007,completed,,1.0\n1,0.2,0.03,completed,,1.0\n"
                    "2,0.1,nan,failed,x,1.0\n")
-    text = report(csv, servo_scene, tmp_path / "f.png")
+    text, written = report(csv, servo_scene, tmp_path, plot=True)
     assert "J_Mx = 14.09 kg m^2 at the crank = 0.1409 kg m^2" in text
-    assert (tmp_path / "f.png").stat().st_size > 10_000
+    assert written == [tmp_path / "flywheel.csv", tmp_path / "flywheel.png"]
+    assert (tmp_path / "flywheel.png").stat().st_size > 10_000
 
 
 def kill_me(names, rows, status, victim, key):

@@ -84,10 +84,12 @@ def from_scene(path):
     return model, table, scene
 
 
-def run(path, t_end: float, dt: float = 1e-3, rtol: float = 1e-11):
+def run(path, t_end: float, dt: float = 1e-3, rtol: float = 1e-11, table=None):
     """Samples every dt to t_end: dict of arrays time, phi, w_crank, w_a, w_b, w_h, M_C,
-    E_brake_b, E_brake_h, period, motor torque, the drive's last event times and event count; plus the drive's discrete state at the end."""
-    model, table, _ = from_scene(path)
+    E_brake_b, E_brake_h, period, motor torque, the drive's last event times and event count; plus the drive's discrete state at the end.
+    `table`: command rows [[t, value], ...] instead of the scene's (switch times on the dt grid)."""
+    model, scene_table, _ = from_scene(path)
+    table = scene_table if table is None else table
     switches = {round(t / dt): v for t, v in table}
     names = [v.name for v in model.outputs]
     x = model.initial_state(model.inputs_at(0.0, np.zeros(9)))

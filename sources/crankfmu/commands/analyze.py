@@ -1,125 +1,130 @@
-"""`crankfmu analyze impact`: the rocker impact paper's table and which of its claims hold;
-`crankfmu analyze hammer CSV`: the blows of a hammer run (hammer.toml, hammer_bearings.toml);
-`crankfmu analyze flywheel DIR/sweep.csv`: the servo press's delta against the flywheel from a
-sweep, with the paper's eq. (28) (crankfmu/studies/flywheel.py);
-`crankfmu analyze press|impact|planetary --plot DIR`: the papers' figures, each analytic curve
-beside the simulation it approximates (crankfmu/studies/papers.py)."""
+"""`crankfmu analyze SUBJECT [--out DIR] [--plot]`: the papers' analyses, each beside the
+simulation it approximates (docs/papers.md lists every table and figure and the doc page that
+discusses it). Every subcommand prints its tables, writes them as CSV into --out (default
+results/analyze-SUBJECT/) and, with --plot, its figures there too:
+
+    press      seed 000: (28) in both conventions, the base-link mass sweep (Fig. 4) with its
+               claim; figures of the dynamic errors, the base-link offset, the flywheel
+    impact     seed 004: the MO-100 table and claims; figures P(t), T(t) and Figs. 2-3 for the
+               three k_n; --hertz-peak: the support stiffness iterated on the Hertz peak
+    planetary  seed 001: the four periods, engagement time against alpha_b, brake torques
+    stopping   seed 001: stopping from a range of crank angles against stopping at TDC
+    mill-stand seed 002: the mobility tables and schemes, seed's reading against the rank
+    hammer     the blows of hammer runs (CSV of hammer.toml, hammer_bearings.toml)
+    flywheel   the servo press's delta against the flywheel from a sweep's sweep.csv
+"""
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
 
+MECHANISMS = ("stand_drive_p1", "stand_drive_p2p3", "stand_drive_p4", "stand_drive_p1_coaxial",
+              "stand_drive_p2p3_coaxial", "stand_drive_p4_coaxial")
+
+
+def _outputs(p, name: str, plot_help: str) -> None:
+    p.add_argument("--out", type=Path, metavar="DIR",
+                   help=f"folder for the tables (CSV) and figures (default "
+                        f"results/analyze-{name}/)")
+    p.add_argument("--plot", action="store_true", help=f"also draw the figures: {plot_help}")
+
+
+def _scene_option(p, default: str, what: str) -> None:
+    p.add_argument("--scene", type=Path, default=Path("scenarios") / default,
+                   help=f"{what} (default scenarios/{default})")
+
 
 def register(sub) -> None:
-    p = sub.add_parser("analyze", help="analytic results of the papers")
+    p = sub.add_parser("analyze", help="the papers' analyses beside the simulations")
     what = p.add_subparsers(dest="analysis", required=True)
-    impact = what.add_parser("impact", help="MO-100 table: Pm, tau, Tm, Tm/Pm, max dP, max dT "
-                                            "per k_n, both readings of S, and the paper's claims")
-    for name, unit in (("J", "kg.m2"), ("m", "kg"), ("r", "m"), ("R_c", "m"), ("d", "m"),
-                       ("E", "Pa"), ("rho", "kg/m3"), ("nu", "1"), ("V0", "m/s")):
-        impact.add_argument(f"--{name}", type=float, help=f"[{unit}] (default: MO-100)")
-    impact.add_argument("--k-n", type=float, nargs="+", default=[40e6, 80e6, 160e6],
-                        help="support constants k_n [N(2/3)/m]")
-    impact.add_argument("--S-factor", type=float, nargs="+", default=[1.1, 0.9],
-                        help="strike distance S as a multiple of the centre of percussion J/(m r)")
-    impact.add_argument("--plot", type=Path, metavar="DIR",
-                        help="write impact_forces.png (seed 004, Fig. 2-3: P(t), T(t), first and "
-                             "second approximation against the run of --scene) into DIR")
-    impact.add_argument("--scene", type=Path, default=Path("scenarios/mo100_impact.toml"),
-                        help="the impact scene run for --plot (default "
-                             "scenarios/mo100_impact.toml)")
-    impact.set_defaults(func=run_impact)
-    press = what.add_parser("press", help="seed 000's figures: dynamic errors, base-link "
-                                          "inertia with offset a, flywheel (--plot DIR)")
-    press.add_argument("--plot", type=Path, metavar="DIR", required=True,
-                       help="directory for press_dynamic_error.png, press_base_link.png, "
-                            "press_flywheel.png")
-    press.add_argument("--scene", type=Path, default=Path("scenarios/servo_press.toml"),
-                       help="the servo press scene whose parameters are used (default "
-                            "scenarios/servo_press.toml)")
+
+    press = what.add_parser("press", help="seed 000: eq. (28) in both conventions, the "
+                                          "base-link mass sweep (Fig. 4); figures")
+    _scene_option(press, "servo_press.toml", "the servo press scene whose parameters are used")
+    press.add_argument("--masses", type=float, nargs="+", metavar="KG",
+                       help="base-link and counterweight masses of the Fig. 4 sweep [kg] "
+                            "(default 0, 20, ..., 400)")
+    _outputs(press, "press", "press_dynamic_error.png, press_base_link.png, "
+                             "press_flywheel.png, press_base_link_mass.png")
     press.set_defaults(func=run_press)
-    planetary = what.add_parser("planetary", help="seed 001's figures: the four periods, "
-                                                  "engagement time against alpha_b, brake "
-                                                  "torque for an engagement time (--plot DIR)")
-    planetary.add_argument("--plot", type=Path, metavar="DIR", required=True,
-                           help="directory for planetary.png")
-    planetary.add_argument("--scene", type=Path,
-                           default=Path("scenarios/planetary_engagement.toml"),
-                           help="the planetary drive scene (motor and drive parameters; default "
-                                "scenarios/planetary_engagement.toml)")
+
+    impact = what.add_parser("impact", help="seed 004: MO-100 table, the paper's claims; "
+                                            "figures P(t), T(t) and Figs. 2-3")
+    for dest, name, unit in (("J", "J", "kg.m2"), ("m", "m", "kg"), ("r", "r", "m"),
+                             ("r_c", "R_c, radius of the striking sphere", "m"),
+                             ("d", "d, tool diameter", "m"), ("E", "E", "Pa"),
+                             ("rho", "rho", "kg/m3"), ("nu", "nu", "1"),
+                             ("v0", "V0, impact speed", "m/s")):
+        impact.add_argument(f"--{dest.replace('_', '-')}", dest=dest, type=float,
+                            help=f"{name} [{unit}] (default: MO-100)")
+    impact.add_argument("--k-n", type=float, nargs="+", default=[40e6, 80e6, 160e6],
+                        help="bearing constants k_n [N(2/3)/m] (table and Figs. 2-3)")
+    impact.add_argument("--s-factor", type=float, nargs="+", default=[1.1, 0.9],
+                        help="strike distance S as a multiple of the centre of percussion "
+                             "J/(m r) [1]")
+    impact.add_argument("--hertz-peak", action="store_true",
+                        help="also iterate the support stiffness c0 = k_n Tm^(1/3) on the peak "
+                             "of the Hertz-contact impact (the model stepped) and compare")
+    _scene_option(impact, "mo100_impact.toml", "the impact scene run for the figures")
+    _outputs(impact, "impact", "impact_forces.png, impact_stiffness.png")
+    impact.set_defaults(func=run_impact)
+
+    planetary = what.add_parser("planetary", help="seed 001: the four periods, engagement time "
+                                                  "against alpha_b, brake torque (~10 s)")
+    _scene_option(planetary, "planetary_engagement.toml",
+                  "the planetary drive scene (motor and drive parameters)")
+    _outputs(planetary, "planetary", "planetary.png")
     planetary.set_defaults(func=run_planetary)
-    hammer = what.add_parser("hammer", help="blow table of a hammer run (CSV of hammer.toml or "
-                                            "hammer_bearings.toml); --plot PNG")
+
+    stopping = what.add_parser("stopping", help="seed 001: stopping from a range of crank "
+                                                "angles against stopping at TDC (~10 s)")
+    _scene_option(stopping, "conventional_press.toml",
+                  "motor + planetary drive + press scene with an engage edge in its command")
+    stopping.add_argument("--angles", type=float, nargs="+", metavar="DEG",
+                          help="crank angles after TDC at the stop command [deg] (default 90, "
+                               "105, ..., 360)")
+    _outputs(stopping, "stopping", "stopping.png")
+    stopping.set_defaults(func=run_stopping)
+
+    mill = what.add_parser("mill-stand", help="seed 002: mobility tables and kinematic schemes "
+                                              "of the stand drive variants")
+    mill.add_argument("--mechanisms", type=Path, nargs="+", metavar="TOML",
+                      help="mechanism descriptions (default the six stand_drive_p1/p2p3/p4 "
+                           "files, generic and coaxial, in scenarios/mechanisms/)")
+    _outputs(mill, "mill-stand", "one <mechanism>.png per mechanism")
+    mill.set_defaults(func=run_mill_stand)
+
+    hammer = what.add_parser("hammer", help="blow table of hammer runs (CSV of hammer.toml or "
+                                            "hammer_bearings.toml)")
     hammer.add_argument("csv", type=Path, nargs="+", help="result CSV(s) of a hammer scene")
-    hammer.add_argument("--component", default="hammer", help="the CrankRockerHammer component")
-    hammer.add_argument("--plot", type=Path, help="PNG: motor torque, crank speed, P and T peaks")
+    hammer.add_argument("--component", default="hammer",
+                        help="the CrankRockerHammer component (a name)")
+    _outputs(hammer, "hammer", "hammer.png (motor torque, crank speed, P and T peaks)")
     hammer.set_defaults(func=run_hammer)
+
     fly = what.add_parser("flywheel", help="servo press delta against motor.J_flywheel from a "
                                            "sweep's sweep.csv, with eq. (28) and the first "
-                                           "approximation; --plot PNG")
+                                           "approximation")
     fly.add_argument("csv", type=Path, help="sweep.csv of crankfmu sweep --vary motor.J_flywheel=...")
-    fly.add_argument("--scene", type=Path, default=Path("scenarios/servo_press.toml"),
-                     help="the swept scene (default scenarios/servo_press.toml)")
-    fly.add_argument("--plot", type=Path, help="PNG: delta against J_flywheel, (28) marked")
+    _scene_option(fly, "servo_press.toml", "the swept scene")
+    _outputs(fly, "flywheel", "flywheel.png (delta against J_flywheel, (28) marked)")
     fly.set_defaults(func=run_flywheel)
 
 
-def run_flywheel(args) -> int:
-    from ..system.load import load_scene
-    from ..studies.flywheel import report
-
-    print(report(args.csv, load_scene(args.scene), args.plot))
-    if args.plot:
-        print(f"wrote {args.plot}")
-    return 0
-
-
-def run_impact(args) -> int:
-    from ..studies.rocker_analysis import (RockerData, claims, format_claims, format_impact_table,
-                                           impact_table)
-
-    if args.plot:  # bad --plot or --scene fails before the table is computed
-        out, scene = _plot_dir(args.plot), _scene_file(args.scene)
-    changes = {k: getattr(args, k) for k in ("J", "m", "r", "R_c", "d", "E", "rho", "nu", "V0")
-               if getattr(args, k) is not None}
-    rows = impact_table(RockerData(**changes), args.S_factor, args.k_n)
-    print(format_impact_table(rows))
-    print()
-    print(format_claims(claims(rows)))
-    if args.plot:
-        from ..studies.papers import impact_figures
-        _written(impact_figures(scene, out))
-    return 0
-
-
-def run_press(args) -> int:
-    from ..system.load import load_scene
-    from ..studies.papers import press_figures
-
-    out = _plot_dir(args.plot)
-    _written(press_figures(load_scene(_scene_file(args.scene)), out))
-    return 0
-
-
-def run_planetary(args) -> int:
-    from ..studies.papers import planetary_figures
-
-    out = _plot_dir(args.plot)
-    _written(planetary_figures(_scene_file(args.scene), out))
-    return 0
-
-
-def _plot_dir(path: Path) -> Path:
-    """--plot DIR: created if missing; an existing file there is an error (exit 2)."""
+def _out_dir(out: Path | None, name: str) -> Path:
+    """--out DIR (default results/analyze-NAME): created if missing; a file there is an error
+    (exit 2)."""
     from ..errors import CrankfmuError
 
+    path = out or Path("results") / f"analyze-{name}"
     if path.exists() and not path.is_dir():
-        raise CrankfmuError(f"--plot {path}: is a file; --plot takes a directory for the PNGs")
+        raise CrankfmuError(f"--out {path}: is a file; --out takes a folder for the tables and "
+                            "figures")
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as err:
-        raise CrankfmuError(f"--plot {path}: cannot create the directory ({err.strerror})")
+        raise CrankfmuError(f"--out {path}: cannot create the folder ({err.strerror})")
     return path
 
 
@@ -132,9 +137,131 @@ def _scene_file(path: Path) -> Path:
     return path
 
 
+def _positive(values, option: str, unit: str) -> None:
+    from ..errors import CrankfmuError
+
+    bad = [v for v in values or () if not (np.isfinite(v) and v >= 0.0)]
+    if bad:
+        raise CrankfmuError(f"{option} {bad[0]:g}: must be a finite number >= 0 [{unit}]")
+
+
 def _written(paths) -> None:
     for path in paths:
         print(f"wrote {path}")
+
+
+def run_press(args) -> int:
+    from ..system.load import load_scene
+    from ..studies import base_link, papers
+    from ..studies.flywheel import eq28_conventions, format_conventions, write_conventions
+
+    _positive(args.masses, "--masses", "kg")
+    scene = load_scene(_scene_file(args.scene))
+    out = _out_dir(args.out, "press")
+    press, m_static, _, u0 = papers.press_models(scene)
+    conv = eq28_conventions(press, m_static, u0)
+    print(format_conventions(conv, scene.name))
+    written = [write_conventions(conv, out / "press_flywheel_28.csv")]
+    sweep = base_link.mass_sweep(scene, args.masses or base_link.DEFAULT_MASSES)
+    print()
+    print(base_link.format_table(sweep))
+    print("\n".join(base_link.claim_verdict(sweep)))
+    written.append(base_link.write_csv(sweep, out / "press_base_link_mass.csv"))
+    if args.plot:
+        written += papers.press_figures(scene, out)
+        written += papers.save_figures({"press_base_link_mass.png": base_link.figure(sweep)}, out)
+    _written(written)
+    return 0
+
+
+def run_impact(args) -> int:
+    from ..studies import rocker_analysis as ra
+    from ..studies.papers import progress
+
+    scene = _scene_file(args.scene) if args.plot else None   # before the table is computed
+    out = _out_dir(args.out, "impact")
+    changes = {field: getattr(args, dest) for field, dest in
+               (("J", "J"), ("m", "m"), ("r", "r"), ("R_c", "r_c"), ("d", "d"), ("E", "E"),
+                ("rho", "rho"), ("nu", "nu"), ("V0", "v0")) if getattr(args, dest) is not None}
+    base = ra.RockerData(**changes)
+    progress(f"analyze impact: the table, {len(args.s_factor) * len(args.k_n)} row(s)")
+    rows = ra.impact_table(base, args.s_factor, args.k_n)
+    print(ra.format_impact_table(rows))
+    print()
+    print(ra.format_claims(ra.claims(rows)))
+    written = [ra.write_impact_table(rows, out / "impact_table.csv")]
+    if args.hertz_peak:
+        progress("analyze impact: the support stiffness on the Hertz peak")
+        peaks = ra.hertz_peak_table(base, args.s_factor, args.k_n)
+        print()
+        print(ra.format_hertz_peak_table(peaks))
+        written.append(ra.write_hertz_peak_table(peaks, out / "impact_hertz_peak.csv"))
+    if args.plot:
+        from ..studies.papers import impact_figures
+        written += impact_figures(scene, out, args.k_n)
+    _written(written)
+    return 0
+
+
+def run_planetary(args) -> int:
+    from ..studies import papers
+
+    scene = _scene_file(args.scene)
+    out = _out_dir(args.out, "planetary")
+    data = papers.planetary_data(scene)
+    print(papers.format_planetary(data))
+    written = [papers.write_planetary_csv(data, out / "planetary.csv")]
+    if args.plot:
+        written += papers.save_figures({"planetary.png": papers.figure_planetary(data)}, out)
+    _written(written)
+    return 0
+
+
+def run_stopping(args) -> int:
+    from ..studies import planetary_stopping as ps
+    from ..studies.papers import save_figures
+
+    scene = _scene_file(args.scene)
+    out = _out_dir(args.out, "stopping")
+    sweep = ps.stopping_sweep(scene, args.angles or ps.DEFAULT_ANGLES)
+    print(ps.format_table(sweep))
+    print("\n".join(ps.verdict(sweep)))
+    written = [ps.write_csv(sweep, out / "stopping.csv")]
+    if args.plot:
+        written += save_figures({"stopping.png": ps.figure(sweep, ps.forging_window(scene))}, out)
+    _written(written)
+    return 0
+
+
+def run_mill_stand(args) -> int:
+    from ..studies.papers import save_figures
+    from ..studies.structure import mobility
+    from ..studies.structure.analysis import analyse
+    from ..studies.structure.description import load_mechanism
+
+    paths = args.mechanisms or [Path("scenarios") / "mechanisms" / f"{m}.toml"
+                                for m in MECHANISMS]
+    items = [(m, analyse(m)) for m in (load_mechanism(p) for p in paths)]
+    out = _out_dir(args.out, "mill-stand")
+    print("\n\n".join(mobility.format_mobility(m, r) for m, r in items))
+    written = [mobility.write_csv(items, out / "mobility.csv")]
+    if args.plot:
+        written += save_figures({f"{m.name}.png": mobility.figure(m, r) for m, r in items}, out)
+    _written(written)
+    return 0
+
+
+def run_flywheel(args) -> int:
+    from ..system.load import load_scene
+    from ..studies.flywheel import report
+    from ..studies.papers import progress
+
+    scene = load_scene(_scene_file(args.scene))
+    progress("analyze flywheel: the first approximation at each flywheel")
+    text, written = report(args.csv, scene, _out_dir(args.out, "flywheel"), args.plot)
+    print(text)
+    _written(written)
+    return 0
 
 
 # -- hammer runs -------------------------------------------------------------------------------
@@ -177,14 +304,8 @@ def format_blows(blows: list[dict], title: str) -> str:
     return "\n".join(lines)
 
 
-def plot_hammer(runs: dict[str, dict], png: Path, comp: str = "hammer") -> None:
-    """Motor torque and load torque; crank speed; P and T peaks of each blow (markers at the
-    time the blow was seen) for one or more runs."""
-    hammer_figure(runs, comp).savefig(png, dpi=110)
-
-
 def hammer_figure(runs: dict[str, dict], comp: str = "hammer"):
-    """The figure of plot_hammer (a matplotlib Figure; the backend is left alone). Curves that
+    """The hammer figure (a matplotlib Figure; the backend is left alone). Curves that
     lie on top of each other (the same torque in two runs, a T peak equal to the P peak) get
     one legend entry saying they coincide."""
     from ..cosim.results import axis_label, mark_coinciding, new_figure, style_axes
@@ -216,12 +337,29 @@ def hammer_figure(runs: dict[str, dict], comp: str = "hammer"):
 
 
 def run_hammer(args) -> int:
-    runs = {}
+    from ..studies.papers import save_figures
+
+    out = _out_dir(args.out, "hammer")
+    runs, rows = {}, []
     for csv in args.csv:
         col = read_columns(csv)
         runs[csv.stem] = col
-        print(format_blows(hammer_blows(col, args.component), f"{csv}:"))
+        blows = hammer_blows(col, args.component)
+        rows += [{"run": csv.stem, **b} for b in blows]
+        print(format_blows(blows, f"{csv}:"))
+    written = [_write_blows(rows, out / "hammer_blows.csv")]
     if args.plot:
-        plot_hammer(runs, args.plot, args.component)
-        print(f"wrote {args.plot}")
+        written += save_figures({"hammer.png": hammer_figure(runs, args.component)}, out)
+    _written(written)
     return 0
+
+
+def _write_blows(rows: list[dict], path: Path) -> Path:
+    import csv
+    keys = (("run", ""), ("n", "1"), ("t", "s"), ("phi", "rad"), ("V_impact", "m/s"),
+            ("P_peak", "N"), ("T_peak", "N"))
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow([f"{k} [{u}]" if u else k for k, u in keys])
+        w.writerows([r[k] for k, _ in keys] for r in rows)
+    return path

@@ -1,5 +1,5 @@
 """The papers' figures, each analytic curve beside the simulation it approximates
-(`crankfmu analyze press|impact|planetary --plot DIR`).
+(`crankfmu analyze press|impact|planetary --out DIR --plot`; docs/papers.md lists them all).
 
 seed 000 (Stephenson servo press, crankfmu.studies.press_analysis):
     press_dynamic_error.png   psi' and psi over the crank angle: first approximation (eq. 19-20,
@@ -8,22 +8,29 @@ seed 000 (Stephenson servo press, crankfmu.studies.press_analysis):
     press_base_link.png       J_2O(phi) and J(phi) with a base-link offset a != 0 (eq. 21-22,
                               Fig. 3): the printed (21), the model, and the kinetic energy of the
                               bodies from finite differences of their positions
-    press_flywheel.png        eq. (26) against the flywheel with (28) marked, and delta from the
-                              first approximation against the simulated delta
+    press_flywheel.png        eq. (26) in both conventions for J_M0 against the flywheel with (28)
+                              marked and the simulated gear moment beside it; delta from the
+                              first approximation against the simulated delta; the difference of
+                              the two conventions' (28) against the slider mass
+    press_base_link_mass.png  Fig. 4, the base link's mass (crankfmu.studies.base_link)
 seed 004 (rocker impact, crankfmu.studies.rocker_analysis):
     impact_forces.png         P(t), T(t): first approximation (6), (12), second approximation
                               (14)-(18), against the RockerImpact run of the scene
+    impact_stiffness.png      Figs. 2-3: the same for the three bearing constants k_n
 seed 001 (planetary clutch drive, crankfmu.models.planetary_drive.planetary_drive):
     planetary.png             speeds over the four periods and the brake energies, the
                               engagement time against alpha_b, the ring brake torque needed for a
                               given engagement time: the closed form of the linear motor law
                               (piecewise matrix exponentials) against the FMU runs of the scene
+    (stopping from crank angles: crankfmu.studies.planetary_stopping; seed 002's mobility
+    tables: crankfmu.studies.structure.mobility)
 
 Here only the figures and the short simulations behind them; the equations are the physics
 modules' (nothing in physics/ imports this module).
 """
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,6 +40,7 @@ import numpy as np
 from ..system.scene import SceneError
 
 TWO_PI = 2.0 * math.pi
+progress = logging.getLogger("crankfmu").info   # notes on stderr (-q hides them)
 A_FIGURE = 0.08  # m: base-link offset drawn in press_base_link.png (triangle height, ~ l/3)
 
 
@@ -151,12 +159,38 @@ class PressRevolution:
         return float((self.w.max() - self.w.min()) * self.period / TWO_PI)
 
 
+@dataclass(frozen=True)
+class CrankMass:
+    """A point mass fixed on the crank opposite the crank pin: a counterweight.
+
+    mass [kg] at radius [m] from the crank axis, g [m/s^2]. The crank pin is at r (cos phi,
+    sin phi) with y downwards (the press model: the slider's S grows towards BDC, the base
+    link's weight moment is +m2 g r cos phi); the counterweight is at -radius (cos phi, sin phi),
+    so its weight moment at the crank is -mass g radius cos phi and its inertia mass radius^2."""
+
+    mass: float
+    radius: float
+    g: float
+
+    @property
+    def inertia(self) -> float:
+        """mass radius^2 [kg m^2], constant: a point on a rigid crank."""
+        return self.mass * self.radius ** 2
+
+    def moment(self, phi):
+        """Weight moment at the crank [N m] at crank angle phi [rad] (scalar or array)."""
+        return -self.mass * self.g * self.radius * np.cos(phi)
+
+
 def press_steady_revolution(press, motor, u0: float, revolutions: int = 6,
-                            n: int = 720, rtol: float = 1e-10) -> PressRevolution:
+                            n: int = 720, rtol: float = 1e-10,
+                            crank_mass: CrankMass | None = None) -> PressRevolution:
     """Motor (DcServoMotor) and press (StephensonPress) rigidly coupled (the port convention:
     flange_w = i phi', flange_J into J) integrated as one ODE (DOP853), started at the analytic
     mean speed with the motor in equilibrium; the last of `revolutions` revolutions (the slow
-    mode J0/s ~ 0.02 s has decayed by then: a revolution takes 0.37 s) on n crank angles."""
+    mode J0/s ~ 0.02 s has decayed by then: a revolution takes 0.37 s) on n crank angles.
+    A `crank_mass` enters through the same port as the motor: its inertia / i^2 added to
+    flange_J, its weight moment / i to flange_tau (the press reduces them back to the crank)."""
     from scipy.integrate import solve_ivp
     from scipy.optimize import brentq
 
@@ -164,13 +198,15 @@ def press_steady_revolution(press, motor, u0: float, revolutions: int = 6,
 
     i = press.p.gear_ratio
     n_m = len(motor.state_names())
+    J_extra = crank_mass.inertia / i ** 2 if crank_mass else 0.0
 
     def motor_u(phi, w):
         return [i * w, i * phi, u0, 0.0]
 
     def rhs(t, x):
         y = motor.output_values(t, x[2:], motor_u(x[0], x[1]))
-        dx = list(press.derivatives(t, x[:2], [y[0], y[1], 0.0, 0.0]))
+        tau_extra = crank_mass.moment(x[0]) / i if crank_mass else 0.0
+        dx = list(press.derivatives(t, x[:2], [y[0] + tau_extra, y[1] + J_extra, 0.0, 0.0]))
         if n_m:
             dx += list(motor.derivatives(t, x[2:], motor_u(x[0], x[1])))
         return dx
@@ -300,70 +336,118 @@ def figure_base_link(d: dict):
     return fig
 
 
-def flywheel_data(press, motor_static, u0: float, factors=(0.0, 0.5, 1.0, 2.0, 3.0)) -> dict:
-    """Eq. (26)-(28) (l = 1, theta = 0) and delta: first approximation and simulation at the
-    flywheels factor * J_Mx (J_Mx of (28) on the motor shaft)."""
+def gear_moment_ratio(rev: PressRevolution, drive) -> float:
+    """|M_p1|/L_1 [1] of a simulated revolution with the static law: the first harmonic (over
+    the crank angle) of the moment through the gear, M_p = i M_D - J_D phi'' with
+    i M_D = D - s phi', phi'' = phi' dphi'/dphi (spectral derivative on the equally spaced
+    angles), over the first harmonic L_1 of the disturbance. The time-domain counterpart of
+    sqrt(23)/(26) (tests/test_press_physics.py computes it independently from its own
+    steady state; tests/test_papers_claims.py compares it with both readings of (26))."""
     from . import press_analysis as pa
+
+    n = rev.theta.size
+    spec = np.fft.rfft(rev.w)
+    dw = np.fft.irfft(1j * np.arange(spec.size) * spec, n)
+    Mp = drive.D - drive.s * rev.w - drive.J_D * rev.w * dw
+    L1 = pa.disturbance_harmonics(drive, n_harmonics=1).amp[0]
+    return float(abs(2.0 * np.fft.rfft(Mp)[1] / n) / L1)
+
+
+def flywheel_data(press, motor_static, u0: float, factors=(0.0, 0.5, 1.0, 2.0, 3.0)) -> dict:
+    """Eq. (26)-(28) (l = 1, theta = 0) in both conventions for J_M0 (flywheel.eq28_conventions)
+    and delta: first approximation and simulation at the flywheels factor * J_Mx (J_Mx of (28)
+    on the motor shaft, the product's convention), with the simulated gear-moment ratio
+    (`gear_moment_ratio`) beside sqrt(26); J_Mx of both conventions against the slider mass."""
+    from . import press_analysis as pa
+    from .flywheel import eq28_against, eq28_conventions
     from ..models.dc_motor.dc_motor import DcServoMotor
 
-    base = pa.ReducedDrive.from_models(press, motor_static, u0)
-    err = pa.dynamic_error(base)
+    conv = eq28_conventions(press, motor_static, u0)
     i2 = press.p.gear_ratio ** 2
-    W, J_D, J_M0, s = err.omega0, base.J_D, err.J0 - base.J_D, err.s
-    J_Mx = pa.flywheel_inertia_theta0(W, J_D, J_M0, s) / i2
+    J_Mx = conv["mean"]["J_Mx_motor"]
     grid = np.linspace(0.0, 4.0 * J_Mx, 81)
-    ratio = np.array([math.sqrt(pa.flywheel_ratio(j * i2, W, J_D, J_M0, s)) for j in grid])
+    ratio = {c: np.array([math.sqrt(pa.flywheel_ratio(j * i2, conv["omega0"], conv["J_D"],
+                                                      conv[c]["J_M0"], conv["s"]))
+                          for j in grid]) for c in ("paper", "mean")}
     J_f = np.array(factors) * J_Mx
-    d1, dsim = [], []
+    d1, dsim, rsim = [], [], []
     for j in J_f:
         motor = DcServoMotor({**vars(motor_static.p), "J_flywheel": float(j)},
                              sorted(motor_static.enabled))
-        d1.append(pa.dynamic_error(pa.ReducedDrive.from_models(press, motor, u0)).delta)
-        dsim.append(press_steady_revolution(press, motor, u0).delta)
-    return {"grid": grid, "ratio": ratio, "J_Mx": J_Mx, "J_f": J_f,
-            "delta_1": np.array(d1), "delta_sim": np.array(dsim)}
+        drive = pa.ReducedDrive.from_models(press, motor, u0)
+        rev = press_steady_revolution(press, motor, u0)
+        d1.append(pa.dynamic_error(drive).delta)
+        dsim.append(rev.delta)
+        rsim.append(gear_moment_ratio(rev, drive))
+    return {"grid": grid, "ratio": ratio["mean"], "ratio_paper": ratio["paper"], "J_Mx": J_Mx,
+            "J_Mx_paper": conv["paper"]["J_Mx_motor"], "conventions": conv, "J_f": J_f,
+            "delta_1": np.array(d1), "delta_sim": np.array(dsim), "ratio_sim": np.array(rsim),
+            "against": eq28_against(press, motor_static, u0)}
 
 
 def figure_flywheel(d: dict):
-    from ..cosim.results import axis_label, new_figure, style_axes
+    from ..cosim.results import PALETTE, axis_label, new_figure, style_axes
 
-    fig = new_figure(figsize=(9, 6))
-    ax = fig.subplots(2, 1, sharex=True)
+    fig = new_figure(figsize=(9, 9.5))
+    gs = fig.add_gridspec(3, 1, height_ratios=(1.0, 1.0, 1.0))
+    ax = [fig.add_subplot(gs[0])]
+    ax += [fig.add_subplot(gs[1], sharex=ax[0]), fig.add_subplot(gs[2])]
     for x in ax:
         style_axes(x)
-    ax[0].plot(d["grid"], d["ratio"], lw=1.4,
-               label="sqrt of (26): gear moment / disturbance, l = 1")
-    ax[0].axvline(d["J_Mx"], color="k", lw=0.8, ls=":", label=f"(28): J_Mx = {d['J_Mx']:.4f} "
-                  "kg.m2 on the motor shaft")
+    c = d["conventions"]
+    ax[0].plot(d["grid"], d["ratio"], lw=1.4, color=PALETTE[0],
+               label="sqrt of (26), J_M0 = mean of J - J_D (product)")
+    ax[0].plot(d["grid"], d["ratio_paper"], lw=1.0, ls="--", color=PALETTE[1],
+               label="sqrt of (26), J_M0 = J1 + J_2O (paper)")
+    ax[0].plot(d["J_f"], d["ratio_sim"], "o", ms=5, color=PALETTE[2],
+               label="simulation: first harmonic of i M_D - J_D phi'' over L_1")
+    for key, colour, name in (("J_Mx", PALETTE[0], "product"), ("J_Mx_paper", PALETTE[1],
+                                                                "paper")):
+        for x in ax[:2]:
+            x.axvline(d[key], color=colour, lw=0.8, ls=":")
+    ax[0].plot([], [], color="0.3", lw=0.8, ls=":", label=f"(28): J_Mx = {d['J_Mx']:.5f} "
+               f"(product), {d['J_Mx_paper']:.5f} kg.m2 (paper): {100 * c['relative']:+.2f} %")
     ax[1].plot(d["J_f"], 100 * d["delta_sim"], "o-", ms=5, label="simulation (static law)")
     ax[1].plot(d["J_f"], 100 * d["delta_1"], "s--", ms=4, label="first approximation (20)")
-    ax[1].axvline(d["J_Mx"], color="k", lw=0.8, ls=":")
     ax[0].set_ylabel(axis_label("ratio (26), square root", None))
     ax[1].set_ylabel(axis_label("non-uniformity delta", "%"))
     ax[1].set_xlabel(axis_label("flywheel J_flywheel on the motor shaft", "kg.m2"))
-    for x in ax:
-        x.legend(fontsize=7, loc="best")
+    k = d["against"]
+    ax[2].plot(k["values"], 100 * k["relative"], lw=1.4, color=PALETTE[0],
+               label="J_Mx(product)/J_Mx(paper) - 1")
+    scene_rel = float(np.interp(k["scene"], k["values"], k["relative"]))
+    ax[2].plot([k["scene"]], [100 * scene_rel], "o", ms=6, color=PALETTE[3],
+               label=f"the scene's {k['parameter']} = {k['scene']:g} kg: {100 * scene_rel:+.2f} %")
+    ax[2].set_xlabel(axis_label(f"slider mass {k['parameter']}", "kg"))
+    ax[2].set_ylabel(axis_label("difference of J_Mx (28)", "%"))
+    ax[2].legend(fontsize=7, loc="lower left")
+    ax[0].legend(fontsize=7, loc="upper center")
+    ax[1].legend(fontsize=7, loc="best")
     ax[0].set_title("Seed 000, eq. (26)-(28): the flywheel effect (the ratio (26) has its "
                     "minimum at (28); delta falls monotonically)", fontsize=9)
+    ax[2].set_title("(28) in both conventions for J_M0 (the product adds m5 <S'^2> to the "
+                    "paper's J1 + J_2O), against the slider mass", fontsize=9)
     fig.tight_layout()
     return fig
 
 
 def press_figures(scene, out_dir: Path) -> list[Path]:
     press, m_static, m_lag, u0 = press_models(scene)
+    progress("analyze press: dynamic errors, base-link offset, flywheel")
     figures = {"press_dynamic_error.png": figure_dynamic_error(
                    dynamic_error_data(press, m_static, m_lag, u0)),
                "press_base_link.png": figure_base_link(base_link_data(press)),
                "press_flywheel.png": figure_flywheel(flywheel_data(press, m_static, u0))}
-    return _save(figures, out_dir)
+    return save_figures(figures, out_dir)
 
 
 # =============================================================================================
 # seed 004: P(t), T(t) with the second approximation
 # =============================================================================================
-def impact_data(scene) -> dict:
-    """Run the scene (RockerImpact with the linearised stiffnesses it records) and evaluate the
-    first and second approximations and the exact linear solution at the stiffnesses used."""
+def impact_data(scene, k_n: float | None = None) -> dict:
+    """Run the scene (RockerImpact with the linearised stiffnesses it records; the bearing
+    constant k_n [N(2/3)/m] replaced if given) and evaluate the first and second
+    approximations and the exact linear solution at the stiffnesses used."""
     from ..system.load import load_scene
     from . import rocker_analysis as ra
 
@@ -374,6 +458,8 @@ def impact_data(scene) -> dict:
     for var in ("P", "T", "c_contact_used", "c_support_used"):
         if f"{comp}.{var}" not in sc.record:
             raise SceneError(sc.path, "record.variables", f"the figure needs {comp}.{var}")
+    if k_n is not None:
+        sc.components[comp].parameters["k_n"] = float(k_n)
     v = simulated(sc)
     c, c0 = float(v[f"{comp}.c_contact_used"][0]), float(v[f"{comp}.c_support_used"][0])
     params = sc.components[comp].parameters
@@ -384,11 +470,14 @@ def impact_data(scene) -> dict:
     exact = ra.exact_linear(data, c, c0)
     t = v["time"]
     in_contact = t <= exact.tau
+    y, z = _on_times(second.flow, t), _on_times(exact.flow, t)
     return {"t": t, "P_sim": v[f"{comp}.P"], "T_sim": v[f"{comp}.T"], "tau": exact.tau,
-            "in_contact": in_contact, "P1": second.P1(t), "T1": second.T1(t),
-            "P2": second.P1(t) + second.dP(t), "T2": second.T1(t) + second.dT(t),
-            "P_exact": exact.P(t), "T_exact": exact.T(t), "c": c, "c0": c0,
-            "mu": ra.validity(data, c, c0)["mu"], "effects": sc.components[comp].effects}
+            "in_contact": in_contact, "P1": y[:, 0], "T1": y[:, 2],
+            "P2": y[:, 0] + y[:, 4], "T2": y[:, 2] + y[:, 6],
+            "P_exact": z[:, 2], "T_exact": z[:, 0], "c": c, "c0": c0,
+            "mu": ra.validity(data, c, c0)["mu"], "effects": sc.components[comp].effects,
+            "k_n": data.k_n, "S": data.S, "S_percussion": data.S_percussion,
+            "first": second.first}
 
 
 def figure_impact(d: dict):
@@ -425,8 +514,81 @@ def figure_impact(d: dict):
     return fig
 
 
-def impact_figures(scene, out_dir: Path) -> list[Path]:
-    return _save({"impact_forces.png": figure_impact(impact_data(scene))}, out_dir)
+def _on_times(flow, t: np.ndarray) -> np.ndarray:
+    """The states of a LinearFlow at the recorded times: on an equally spaced record one matrix
+    exponential for the step, then products (flow.grid, round-off ~ n eps); else one per time."""
+    steps = np.diff(t)
+    if t.size > 2 and np.allclose(steps, steps[0], rtol=1e-9, atol=0.0):
+        return flow.grid(float(t[0]), float(t[-1]), t.size - 1)[1]
+    return flow(t)
+
+
+def impact_stiffness_data(scene, k_n_values=(40e6, 80e6, 160e6)) -> list[dict]:
+    """`impact_data` for each bearing constant k_n [N(2/3)/m] (the paper's Figs. 2-3 compare
+    three), with the opposite lobe of T (rocker_analysis.opposite_lobe) of the first
+    approximation over its contact [0, tau1] and of the simulation over the simulated contact."""
+    from . import rocker_analysis as ra
+
+    out = []
+    progress(f"analyze impact: the figures, {len(k_n_values) + 1} impacts")
+    for kn in k_n_values:
+        d = impact_data(scene, kn)
+        d["lobe_1"] = ra.opposite_lobe(d["first"].T(np.linspace(0.0, d["first"].tau, 2001)))
+        d["lobe_sim"] = ra.opposite_lobe(d["T_sim"][d["in_contact"]])
+        out.append(d)
+    return out
+
+
+def figure_impact_stiffness(runs: list[dict]):
+    """Seed 004, Figs. 2-3 for several k_n: (a) the first approximation P1 (6) and T1 (12) with
+    the simulation; (b) the second-approximation corrections dP, dT of (14)-(18) with what the
+    simulation says the first approximation misses. Curves numbered as in the paper (1, 2, 3
+    in the order of k_n)."""
+    from ..cosim.results import PALETTE, axis_label, new_figure, style_axes
+
+    fig = new_figure(figsize=(11, 8))
+    ax = fig.subplots(2, 2, sharex=True)
+    for x in ax.ravel():
+        style_axes(x)
+    for n, (d, colour) in enumerate(zip(runs, PALETTE), start=1):
+        k = d["in_contact"]
+        t_ms = 1e3 * d["t"][k]
+        name = f"{n}: k_n = {d['k_n'] / 1e6:g}e6"
+        for col, key in ((0, "P"), (1, "T")):
+            sim, first = d[f"{key}_sim"][k] / 1e3, d[f"{key}1"][k] / 1e3
+            second = d[f"{key}2"][k] / 1e3
+            extra = f", opposite lobe {100 * d['lobe_sim']:.0f} %" if key == "T" else ""
+            ax[0, col].plot(t_ms, sim, lw=2.6, alpha=0.35, color=colour,
+                            label=f"{name}: simulation{extra}")
+            ax[0, col].plot(t_ms, first, lw=1.0, ls="--", color=colour,
+                            label=f"{name}: first approximation")
+            ax[1, col].plot(t_ms, sim - first, lw=2.6, alpha=0.35, color=colour,
+                            label=f"{name}: simulation - first approximation")
+            ax[1, col].plot(t_ms, second - first, lw=1.0, ls="--", color=colour,
+                            label=f"{name}: correction d{key} (14)-(18)")
+    S = runs[0]["S"] / runs[0]["S_percussion"]
+    titles = (("(Fig. 2a) contact force P: first approximation (6)", "contact force P", "kN"),
+              ("(Fig. 3a) support reaction T: first approximation (12)", "support reaction T",
+               "kN"),
+              ("(Fig. 2b) correction dP of the second approximation", "dP", "kN"),
+              ("(Fig. 3b) correction dT of the second approximation", "dT", "kN"))
+    for x, (title, name, unit) in zip(ax.ravel(), titles):
+        x.set_title(title, fontsize=9)
+        x.set_ylabel(axis_label(name, unit))
+        x.legend(fontsize=6, loc="best")
+    for x in ax[1]:
+        x.set_xlabel(axis_label("time from first contact", "ms"))
+    fig.suptitle(f"Seed 004, Figs. 2-3: MO-100 impact for {len(runs)} bearing constants k_n "
+                 f"[N(2/3)/m] (S = {S:.2f} J/(m r)), approximations against the RockerImpact "
+                 f"FMU", fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def impact_figures(scene, out_dir: Path, k_n_values=(40e6, 80e6, 160e6)) -> list[Path]:
+    return save_figures({"impact_forces.png": figure_impact(impact_data(scene)),
+                  "impact_stiffness.png": figure_impact_stiffness(
+                      impact_stiffness_data(scene, k_n_values))}, out_dir)
 
 
 # =============================================================================================
@@ -437,11 +599,11 @@ def _component(scene, name: str, fmu: str):
     if comp is None or comp.fmu != fmu:
         found = f"a {comp.fmu}" if comp is not None else "none"
         raise SceneError(scene.path, f"components.{name}",
-                         f"the figure needs a component {name!r} of FMU {fmu} (found {found})")
+                         f"the analysis needs a component {name!r} of FMU {fmu} (found {found})")
     return comp
 
 
-def _save(figures: dict, out_dir: Path) -> list[Path]:
+def save_figures(figures: dict, out_dir: Path) -> list[Path]:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = []
@@ -627,6 +789,7 @@ def planetary_data(scene_path) -> dict:
     from ..system.scene import InputSignal
 
     scene, d, c0, c1, w_idle = planetary_setup(scene_path)
+    progress("analyze planetary: the four periods, engagement times, brake torques (~10 s)")
     four = prepare_scene(scene, stop_time=T_STOP)
     four.inputs["drive.command"] = InputSignal("drive.command", [0.0, T_COMMAND_ON,
                                                T_COMMAND_OFF], [0.0, 1.0, 0.0], "step")
@@ -718,8 +881,36 @@ def figure_planetary(d: dict):
     return fig
 
 
-def planetary_figures(scene, out_dir: Path) -> list[Path]:
-    return _save({"planetary.png": figure_planetary(planetary_data(scene))}, out_dir)
+def format_planetary(d: dict) -> str:
+    """The figure's checks as text: lock times of the four-period run, closed form against
+    simulation; engagement time against alpha_b; the brake torque for a given time."""
+    s = d["sim"]
+    lock_b = float(s["drive.t_lock_b"][-1]) - T_COMMAND_ON
+    lock_h = float(s["drive.t_lock_h"][-1]) - T_COMMAND_OFF
+    lines = ["Seed 001: linear motor law, closed form (piecewise expm) against the FMU runs",
+             f"{'':>28}{'closed form [s]':>16}{'simulation [s]':>16}",
+             f"{'engagement (ring locks)':>28}{d['engage']['t_lock']:>16.7f}{lock_b:>16.7f}",
+             f"{'stop (carrier locks)':>28}{d['stop']['t_lock']:>16.7f}{lock_h:>16.7f}",
+             f"{'alpha_b [1/s]':>28}{'engagement [s]':>16}{'simulation [s]':>16}"]
+    for a, cf, sim in zip(d["alpha_sim"], d["t_lock_cf_sim"], d["t_lock_sim"]):
+        lines.append(f"{a:>28g}{cf:>16.7f}{sim:>16.7f}")
+    lines.append(f"{'wanted engagement [s]':>28}{'Mp_b [N.m]':>16}{'simulation [s]':>16}")
+    for x, Mp, sim in zip(PLANETARY_TARGETS, d["Mp_check"], d["t_check"]):
+        lines.append(f"{x:>28g}{Mp:>16.2f}{sim:>16.7f}")
+    return "\n".join(lines)
+
+
+def write_planetary_csv(d: dict, path: Path) -> Path:
+    """Engagement time against alpha_b (closed form) and the brake torque for a given time."""
+    import csv
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["alpha_b [1/s]", "engagement time [s]"])
+        w.writerows(zip(d["alpha_grid"], d["t_lock_grid"]))
+        w.writerow([])
+        w.writerow(["engagement time [s]", "Mp_b needed [N.m]"])
+        w.writerows(zip(d["targets"], d["Mp_needed"]))
+    return path
 
 
 def _expm(M: np.ndarray) -> np.ndarray:

@@ -150,11 +150,28 @@ class TableRow:
     eps: float
     mu: float
     T1_changes_sign: bool
+    T1_opposite: float     # largest excursion of T1 against the sign of Tm, / |Tm| (on [0, tau])
+    T_opposite_exact: float   # the same of the exact linear T on [0, tau_exact]
 
     @property
     def ratio(self) -> float:
         """Tm/Pm of the first approximation."""
         return abs(self.Tm) / self.Pm
+
+
+ALTERNATION = 0.05   # an opposite lobe of 5 % of Tm or more counts as a sign-alternating T: three
+#                      times the second approximation's largest correction of T (dT <= 1.5 % of
+#                      Tm in the MO-100 table), so it is no artefact of the first approximation
+
+
+def opposite_lobe(T: np.ndarray) -> float:
+    """The largest excursion of a sampled T against the sign of its largest |T|, as a fraction
+    of that |T| [1] (0: T keeps one sign)."""
+    k = int(np.argmax(np.abs(T)))
+    peak = float(T[k])
+    if peak == 0.0:
+        return 0.0
+    return float(max(0.0, np.max(-np.sign(peak) * T)) / abs(peak))
 
 
 def impact_row(data: RockerData, S_factor: float = math.nan,
@@ -167,9 +184,10 @@ def impact_row(data: RockerData, S_factor: float = math.nan,
     t = np.linspace(0.0, fa.tau, 2001)
     T1 = fa.T(t)
     changes = bool(np.any(T1 < -1e-6 * abs(fa.Tm)) and np.any(T1 > 1e-6 * abs(fa.Tm)))
+    T_exact = ex.T(np.linspace(0.0, ex.tau, 2001))
     return TableRow(S_factor, data.k_n, data.S, lin.c, lin.c0, fa.Pm, fa.tau, fa.Tm, sa.max_dP,
                     sa.t_max_dP, sa.max_dT, sa.Pm2, sa.tau2, sa.Tm2, ex.Pm, ex.tau, ex.Tm,
-                    val["eps"], val["mu"], changes)
+                    val["eps"], val["mu"], changes, opposite_lobe(T1), opposite_lobe(T_exact))
 
 
 def impact_table(base: RockerData | None = None, S_factors: Sequence[float] = S_FACTORS,
@@ -207,6 +225,23 @@ def format_impact_table(rows: Sequence[TableRow] | None = None) -> str:
             f"{r.max_dT / 1e3:>6.2f} | {r.Pm_exact / 1e3:>8.1f} {r.tau_exact * 1e3:>6.4f} "
             f"{abs(r.Tm_exact) / 1e3:>8.2f} | {r.eps:>6.4f} {r.mu:>6.4f}")
     return "\n".join(lines)
+
+
+TABLE_UNITS = {"S_factor": "1", "k_n": "N(2/3)/m", "S": "m", "c": "N/m", "c0": "N/m", "Pm": "N",
+               "tau": "s", "Tm": "N", "max_dP": "N", "t_max_dP": "s", "max_dT": "N", "Pm2": "N",
+               "tau2": "s", "Tm2": "N", "Pm_exact": "N", "tau_exact": "s", "Tm_exact": "N",
+               "eps": "1", "mu": "1", "T1_changes_sign": "1", "T1_opposite": "1",
+               "T_opposite_exact": "1"}
+
+
+def write_impact_table(rows: Sequence[TableRow], path):
+    """The table's rows as CSV, every field with its unit."""
+    import csv
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow([f"{k} [{u}]" for k, u in TABLE_UNITS.items()])
+        w.writerows([getattr(r, k) for k in TABLE_UNITS] for r in rows)
+    return path
 
 
 # -- the paper's claims ------------------------------------------------------------------------
@@ -262,6 +297,12 @@ def claims(rows: Sequence[TableRow]) -> list[Claim]:
                 for r in rs),
             ", ".join(f"{_pct(abs(r.Pm / r.Pm_exact - 1))}/{_pct(abs(r.Tm / r.Tm_exact - 1))}"
                       for r in rs))
+        if mid:
+            lobes = ", ".join(f"{100 * r.T1_opposite:.1f} %" for r in rs)
+            add(f"T alternates in sign at k_n = 80e6, curve 2 (opposite lobe >= "
+                f"{100 * ALTERNATION:.0f} % of Tm)", mid[0].T1_opposite >= ALTERNATION, lobes)
+            add("curve 2 is the sign-alternating one (the largest opposite lobe of the three)",
+                max(rs, key=lambda r: r.T1_opposite) is mid[0], lobes)
         add("1st approx. vs exact: contact duration tau within 1 %",
             all(abs(r.tau / r.tau_exact - 1) < 1e-2 for r in rs),
             ", ".join(_pct(1 - r.tau / r.tau_exact) for r in rs) + " short")
@@ -275,3 +316,100 @@ def format_claims(items: Sequence[Claim]) -> str:
         lines.append(f"  S = {c.S_factor:.2f} S_p  {'holds' if c.holds else 'FAILS':>5}  "
                      f"{c.text}: {c.measured}")
     return "\n".join(lines)
+
+
+# -- the support stiffness iterated on the peak of the Hertz-contact impact -----------------------
+HERTZ_EFFECTS = ("support_compliance", "hertz_contact")
+PARAMETERS = ("J", "m", "r", "S", "R_c", "d", "E", "rho", "nu", "V0", "k_n")
+
+
+def hertz_impact(data: RockerData, c0: float | None = None, step: float = 1e-4,
+                 rtol: float = 1e-10) -> dict:
+    """The impact with Hertz contact P = K delta^1.5 on the linear support c0 [N/m] (None: the
+    model's own c0, the paper's iteration on (12) with the linearised contact), by the
+    RockerImpact model stepped as its FMU steps it (`step` [s] per call, its own integrator
+    at `rtol`, the peaks located by the model): P_peak, T_peak [N], impact_duration [s],
+    c_support_used [N/m] once the contact has ended."""
+    from ..models.catalog import make_physics
+    from ..runtime.model import held
+
+    params = {k: getattr(data, k) for k in PARAMETERS}
+    if c0 is not None:
+        params["c_support"] = c0
+    model = make_physics("RockerImpact", params, HERTZ_EFFECTS)
+    u = model.default_inputs()
+    x = model.initial_state(u)
+    names = [v.name for v in model.outputs]
+    atol = [rtol * v for v in model.state_nominal()]
+    for k in range(1000):
+        x = model.step(k * step, x, step, held(u), rtol, atol)
+        y = dict(zip(names, model.output_values((k + 1) * step, x, u)))
+        if y["contact"] == 0.0:
+            return {key: float(y[key]) for key in ("P_peak", "T_peak", "impact_duration",
+                                                   "c_support_used")}
+    raise AnalysisError(f"the Hertz impact did not end within {1000 * step:g} s")
+
+
+def hertz_peak_support(data: RockerData, rtol: float = ITERATION_RTOL,
+                       max_iter: int = 50) -> dict:
+    """The paper's support iteration c0 = k_n Tm^(1/3), with Tm the peak bearing load of the
+    impact itself (Hertz contact, `hertz_impact`) instead of the first approximation's (12):
+    start from the model's c0, repeat until two cycles' Tm differ by less than rtol (the
+    paper's 0.1 %). Returns both c0 [N/m], the Hertz impact with each, and the history of Tm."""
+    linear = hertz_impact(data)
+    T_m, history = linear["T_peak"], [linear["T_peak"]]
+    for _ in range(max_iter):
+        run = hertz_impact(data, support_stiffness(data.k_n, T_m))
+        history.append(run["T_peak"])
+        done = abs(run["T_peak"] - T_m) < rtol * run["T_peak"]
+        T_m = run["T_peak"]
+        if done:
+            return {"linear": linear, "hertz_peak": run, "history": tuple(history)}
+    raise AnalysisError(f"the Hertz-peak support iteration did not converge in {max_iter} "
+                        f"cycles (Tm history {history[-4:]})")
+
+
+def hertz_peak_table(base: RockerData | None = None, S_factors: Sequence[float] = S_FACTORS,
+                     k_n_values: Sequence[float] = K_N_VALUES) -> list[dict]:
+    """One row per (S factor, k_n): `hertz_peak_support` with the row's data."""
+    base = base or RockerData()
+    rows = []
+    for f in S_factors:
+        for k_n in k_n_values:
+            data = base.replace(S=f * base.S_percussion, k_n=k_n)
+            rows.append({"S_factor": f, "k_n": k_n, **hertz_peak_support(data)})
+    return rows
+
+
+def format_hertz_peak_table(rows: Sequence[dict]) -> str:
+    lines = ["Support stiffness with Hertz contact: c0 = k_n Tm^(1/3) iterated on (12) of the "
+             "linearised contact (the model's default) and on the peak of the Hertz impact "
+             "itself (--hertz-peak; RockerImpact stepped, 0.1 % as the paper)",
+             f"{'S/S_p':>6} {'k_n':>5} | {'c0 (12)':>9} {'c0 Hertz':>9} {'diff':>7} | "
+             f"{'Tm (12)':>8} {'Tm Hertz':>8} {'diff':>7} | {'Pm (12)':>8} {'diff':>7} | cycles",
+             f"{'':>6} {'1e6':>5} | {'GN/m':>9} {'GN/m':>9} {'%':>7} | {'kN':>8} {'kN':>8} "
+             f"{'%':>7} | {'kN':>8} {'%':>7} |"]
+    for r in rows:
+        a, b = r["linear"], r["hertz_peak"]
+        lines.append(
+            f"{r['S_factor']:>6.2f} {r['k_n'] / 1e6:>5.0f} | {a['c_support_used'] / 1e9:>9.4f} "
+            f"{b['c_support_used'] / 1e9:>9.4f} "
+            f"{100 * (b['c_support_used'] / a['c_support_used'] - 1):>+7.3f} | "
+            f"{a['T_peak'] / 1e3:>8.2f} {b['T_peak'] / 1e3:>8.2f} "
+            f"{100 * (b['T_peak'] / a['T_peak'] - 1):>+7.3f} | {a['P_peak'] / 1e3:>8.1f} "
+            f"{100 * (b['P_peak'] / a['P_peak'] - 1):>+7.4f} | {len(r['history']) - 1:>6}")
+    return "\n".join(lines)
+
+
+def write_hertz_peak_table(rows: Sequence[dict], path):
+    import csv
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["S_factor [1]", "k_n [N(2/3)/m]", "iteration", "c0 [N/m]", "T_peak [N]",
+                    "P_peak [N]", "impact_duration [s]"])
+        for r in rows:
+            for name in ("linear", "hertz_peak"):
+                x = r[name]
+                w.writerow([r["S_factor"], r["k_n"], name, x["c_support_used"], x["T_peak"],
+                            x["P_peak"], x["impact_duration"]])
+    return path
