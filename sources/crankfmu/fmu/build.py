@@ -62,11 +62,19 @@ def _package_files(folder: Path) -> list[Path]:
     return sorted(p for p in folder.rglob("*.py") if "__pycache__" not in p.parts)
 
 
-def runtime_files(model_name: str | None) -> list[tuple[str, bytes]]:
+# The runtime's FMI adapters: an FMU bundles its own version's and not the other, whose library
+# (pythonfmu for FMI 2.0, pythonfmu3 for FMI 3.0) it does not carry.
+FMI_ADAPTERS = {2: f"{RUNTIME_DIR}/slave.py", 3: f"{RUNTIME_DIR}/slave3.py"}
+
+
+def runtime_files(model_name: str | None, fmi_version: int = 2) -> list[tuple[str, bytes]]:
     """(path in the bundle, bytes): the runtime and the model's folder (models/<folder>/), with
     models/__init__.py; nothing else of crankfmu (the catalog, the analyses, the runner). With
-    model None, the runtime alone (an FMU whose model is in its entry script)."""
-    paths = _package_files(PACKAGE_DIR / RUNTIME_DIR)
+    model None, the runtime alone (an FMU whose model is in its entry script). The runtime
+    carries the FMI adapter of `fmi_version` only."""
+    other = {path for version, path in FMI_ADAPTERS.items() if version != fmi_version}
+    paths = [p for p in _package_files(PACKAGE_DIR / RUNTIME_DIR)
+             if p.relative_to(PACKAGE_DIR).as_posix() not in other]
     if model_name is not None:
         paths += _package_files(PACKAGE_DIR / "models" / model_folder(model_name))
         paths.append(PACKAGE_DIR / "models" / "__init__.py")
