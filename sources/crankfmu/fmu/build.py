@@ -87,7 +87,7 @@ def current_build_id(model_name: str | None) -> str:
     """Hash of the model's bundled sources: the FMU's version and GUID seed (computed once)."""
     templates = [("<entry script>", ENTRY_SCRIPT.encode()),
                  ("<runtime init>", RUNTIME_INIT.encode()),
-                 ("<launcher>", launcher.SOURCE.read_bytes())]  # changed: a new build
+                 ("<launcher>", launcher.source_bytes(2))]  # changed: a new build
     return sources_digest(runtime_files(model_name) + templates)
 
 
