@@ -82,11 +82,16 @@ class RunOptions:
 
 
 def load_fmus(scene: Scene, fmu_dir: Path, log: LogCollector) -> dict[str, FmuInstance]:
+    """Every component's FMU, loaded (FMI 2.0 or 3.0, as the file is) for the interface the
+    scene's master steps it through (`interface` of its class: CoSimulation by default)."""
+    from ..fmu.instance3 import CO_SIMULATION, MODEL_EXCHANGE, open_fmu
+    from ..masters import MASTERS
+    interface = getattr(MASTERS.get(scene.master.algorithm), "interface", CO_SIMULATION)
     fmus: dict[str, FmuInstance] = {}
     for name in scene.components:
-        path = resolve_fmu(scene, name, fmu_dir)
+        path = resolve_fmu(scene, name, fmu_dir, model_exchange=interface == MODEL_EXCHANGE)
         try:
-            fmus[name] = FmuInstance(name, path, log)
+            fmus[name] = open_fmu(name, path, log, interface)
         except (OSError, ValueError, KeyError, IndexError, TypeError, AttributeError,
                 zipfile.BadZipFile, etree.LxmlError) as err:  # not an FMU fmpy can read
             close_fmus(fmus)

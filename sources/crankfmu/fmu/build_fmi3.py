@@ -222,3 +222,52 @@ def report(path: Path, problems: list[str]) -> None:
         print(f"  - {p}")
     if problems:
         raise SystemExit(f"fmpy validate found problems in {path}")
+
+
+# -- the build command (python build.py, crankfmu build): FMI 2.0 and FMI 3.0 ---------------------
+def add_arguments(parser) -> None:
+    """fmu/build.py's arguments (--dest, models) and the FMI version, effects, portability."""
+    from .build import add_arguments as add_fmi2_arguments
+
+    add_fmi2_arguments(parser)
+    parser.add_argument("--fmi", choices=("2", "3", "both"), default="both",
+                        help="FMI version to build: 2 (fmus/), 3 (fmus/fmi3/: Co-Simulation "
+                             "and Model Exchange) or both (default)")
+    parser.add_argument("--effects", default=None,
+                        help="FMI 3.0: the effects (comma separated, 'none' for none) whose "
+                             "Model Exchange states the FMUs expose (default: each model's "
+                             "default effects)")
+    parser.add_argument("--portable", action="store_true",
+                        help="record no builder's python in the FMUs: byte-identical wherever "
+                             "the build runs; the FMUs then find Python by CRANKFMU_PYTHON or "
+                             "on PATH")
+
+
+def build_selected(args) -> list[Path]:
+    """What add_arguments' options ask for; returns the FMU files."""
+    from .build import build_all
+
+    launcher.set_portable(args.portable)
+    built = []
+    if args.fmi in ("2", "both"):
+        built += build_all(args.dest, args.models or None)
+    if args.fmi in ("3", "both"):
+        if args.effects is None:
+            built += build_all3(args.dest, args.models or None)
+        else:
+            effects = [] if args.effects == "none" else \
+                [e.strip() for e in args.effects.split(",") if e.strip()]
+            for name in args.models or FMU_MODELS:
+                path = build_fmu3(name, Path(args.dest) / FMI3_DIR, effects)
+                report(path, validate(path))
+                built.append(path)
+    return built
+
+
+def main(argv=None) -> None:
+    import argparse
+
+    parser = argparse.ArgumentParser(description="Build every crankfmu FMU (FMI 2.0 into fmus/, "
+                                                 "FMI 3.0 into fmus/fmi3/) and validate it")
+    add_arguments(parser)
+    build_selected(parser.parse_args(argv))

@@ -81,6 +81,9 @@ class ModelSlave3(SlaveCore, Fmi3SlaveBase, CoSimulation, ModelExchange):
     def __init__(self, **kwargs):
         Fmi3SlaveBase.__init__(self, **kwargs)
         self._init_core()
+        offset = len(self.physics_class.parameters)  # the effects start as built
+        for k, effect in enumerate(self.physics_class.effects):
+            self._values[offset + k] = effect.name in self.me_effects
         self.default_experiment = DefaultExperiment(0.0, self.default_stop, self.default_step,
                                                     DEFAULT_TOLERANCE)
         n_table = len(self._table)
