@@ -334,6 +334,8 @@ def submit_companions(scene, fmu_dir, companions) -> list:
     tenth of a variable-step master's tolerance): [(knob value, Pending)]."""
     from .estimate import companion_knobs, companion_scene
     m = scene.master
+    if not _co_simulation(m.algorithm):
+        return []
     variable = bool(getattr(MASTERS.get(m.algorithm), "variable_step", False))
     knob, _, values = companion_knobs(variable, m.step, m.tolerance)
     return [(v, companions.submit(run_companion, companion_scene(scene, knob, v), fmu_dir))
@@ -348,6 +350,10 @@ def estimate_run(scene, run_series: tuple, fmu_dir=None, pending: list | None = 
     from .estimate import Estimate, companion_knobs, order_rule, richardson, scene_metric
     from .metrics import MetricError
     m = scene.master
+    if not _co_simulation(m.algorithm):
+        return Estimate(reason=f"{m.algorithm} has no coupling error to estimate: the FMUs are "
+                               f"integrated as one ODE, to its solver's tolerance (compare "
+                               f"with `crankfmu reference`)")
     variable = bool(getattr(MASTERS.get(m.algorithm), "variable_step", False))
     knob, ratio, _ = companion_knobs(variable, m.step, m.tolerance)
     try:
@@ -372,6 +378,12 @@ def estimate_run(scene, run_series: tuple, fmu_dir=None, pending: list | None = 
             f"below {FLOOR_FACTOR:g} x fmu_tolerance: the FMUs' own solver error, which a "
             f"companion with the same fmu_tolerance does not see, may be larger")]))
     return est
+
+
+def _co_simulation(algorithm: str) -> bool:
+    """Does the master co-simulate (step the FMUs), as opposed to integrating their Model
+    Exchange interfaces as one ODE?"""
+    return getattr(MASTERS.get(algorithm), "interface", "CoSimulation") == "CoSimulation"
 
 
 def plot_roles(scene: Scene) -> dict | None:

@@ -85,8 +85,6 @@ def current_build_id(model_name: str, effects: tuple[str, ...]) -> str:
 
 def _bundle(model_name: str, effects: tuple[str, ...], digest: str) -> dict[str, bytes]:
     """resources/: the runtime package, the entry script, pythonfmu3's package."""
-    import pythonfmu3
-
     module, cls = FMU_MODELS[model_name].split(":")
     entries = {f"resources/crankfmu_rt_{digest}/{name}": data
                for name, data in runtime_files(model_name, 3)}
@@ -97,7 +95,7 @@ def _bundle(model_name: str, effects: tuple[str, ...], digest: str) -> dict[str,
         digest=digest, module=module, cls=cls, model_name=model_name, me_effects=effects,
         me_states=states_for(model_name, effects)).encode()
     entries["resources/slavemodule.txt"] = script.encode()
-    package = Path(pythonfmu3.__file__).parent
+    package = installed_pythonfmu3()
     for path in sorted(package.glob("*.py")):
         entries[f"resources/pythonfmu3/{path.name}"] = path.read_bytes()
     binaries = package / "resources" / "binaries"
@@ -106,6 +104,19 @@ def _bundle(model_name: str, effects: tuple[str, ...], digest: str) -> dict[str,
     entries[f"binaries/x86_64-windows/{model_name}.dll"] = \
         (binaries / "x86_64-windows" / "pythonfmu-export.dll").read_bytes()
     return entries
+
+
+def installed_pythonfmu3() -> Path:
+    """The installed pythonfmu3 package's folder, from its distribution's record: not
+    `pythonfmu3.__file__`, which in a process that has loaded an FMI 3.0 FMU may be the copy in
+    that FMU's resources (pythonfmu3's binary puts them first on sys.path), without binaries."""
+    from importlib.metadata import PackageNotFoundError, distribution
+    try:
+        folder = Path(distribution("pythonfmu3").locate_file("pythonfmu3"))
+    except PackageNotFoundError:
+        raise SystemExit("building FMI 3.0 FMUs needs pythonfmu3 (pip install "
+                         "pythonfmu3==0.3.4)") from None
+    return folder
 
 
 def _unpack_python(entries: dict[str, bytes]) -> str:

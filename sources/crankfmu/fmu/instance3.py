@@ -187,6 +187,21 @@ def value_type(var) -> str:
     return "Real" if var.type in FMI3_REAL_TYPES else var.type
 
 
+def feedthrough(fmu) -> dict[str, set[str]]:
+    """output -> the inputs it depends on directly, from the modelDescription's
+    ModelStructure/Outputs. An output listed without a `dependencies` attribute, or not listed,
+    depends on every input (FMI 2.0, section 2.2.8)."""
+    md = fmu.model_description
+    inputs = {v.name for v in md.modelVariables if v.causality == "input"}
+    out: dict[str, set[str]] = {v.name: set(inputs) for v in md.modelVariables
+                                if v.causality == "output"}
+    for unknown in md.outputs or []:
+        name = unknown.variable.name
+        if unknown.dependencies is not None:
+            out[name] = {d.name for d in unknown.dependencies if d.name in inputs}
+    return out
+
+
 def open_fmu(name: str, path: Path, log=None, interface: str = CO_SIMULATION):
     """The FMU file loaded for `interface`: an FMI 3.0 file as Fmu3Instance, an FMI 2.0 file as
     instance.FmuInstance (Co-Simulation only: pythonfmu's FMUs have no Model Exchange)."""
@@ -199,5 +214,5 @@ def open_fmu(name: str, path: Path, log=None, interface: str = CO_SIMULATION):
     return FmuInstance(name, path, log)
 
 
-__all__ = ["CO_SIMULATION", "MODEL_EXCHANGE", "Fmu3Instance", "is_fmi3", "open_fmu",
-           "value_type"]
+__all__ = ["CO_SIMULATION", "MODEL_EXCHANGE", "Fmu3Instance", "feedthrough", "is_fmi3",
+           "open_fmu", "value_type"]

@@ -16,7 +16,7 @@ import numpy as np
 
 from .scene import Scene, SceneError
 from ..fmu.instance import FmuInstance
-from ..fmu.instance3 import value_type
+from ..fmu.instance3 import feedthrough, value_type
 
 log = logging.getLogger(__name__)
 
@@ -234,21 +234,6 @@ def check_links(scene: Scene, fmus: dict[str, FmuInstance]) -> list[Link]:
         _check_variable(scene, "[record].variables", fmus[comp], var,
                         ("output", "input", "parameter", "local"))
     return links
-
-
-def feedthrough(fmu: FmuInstance) -> dict[str, set[str]]:
-    """output -> the inputs it depends on directly, from the modelDescription's
-    ModelStructure/Outputs. An output listed without a `dependencies` attribute, or not listed,
-    depends on every input (FMI 2.0, section 2.2.8)."""
-    md = fmu.model_description
-    inputs = {v.name for v in md.modelVariables if v.causality == "input"}
-    out: dict[str, set[str]] = {v.name: set(inputs) for v in md.modelVariables
-                                if v.causality == "output"}
-    for unknown in md.outputs or []:
-        name = unknown.variable.name
-        if unknown.dependencies is not None:
-            out[name] = {d.name for d in unknown.dependencies if d.name in inputs}
-    return out
 
 
 def algebraic_loops(fmus: dict[str, FmuInstance], links: list[Link]) -> list[list[str]]:
