@@ -20,7 +20,7 @@ from ..masters.inputs import split_at_edges, step_edges
 from .results import (Recorder, column_units, normalize_unit, plot, versions, write_csv,
                       write_sidecar)
 from ..system.wiring import (System, check_components, check_links, check_loops, check_physics,
-                             default_fmu_dir, resolve_fmu)
+                             default_fmu_dir, master_interface, resolve_fmu)
 
 
 class RunError(CrankfmuError, RuntimeError):
@@ -84,9 +84,8 @@ class RunOptions:
 def load_fmus(scene: Scene, fmu_dir: Path, log: LogCollector) -> dict[str, FmuInstance]:
     """Every component's FMU, loaded (FMI 2.0 or 3.0, as the file is) for the interface the
     scene's master steps it through (`interface` of its class: CoSimulation by default)."""
-    from ..fmu.instance3 import CO_SIMULATION, MODEL_EXCHANGE, open_fmu
-    from ..masters import MASTERS
-    interface = getattr(MASTERS.get(scene.master.algorithm), "interface", CO_SIMULATION)
+    from ..fmu.instance3 import MODEL_EXCHANGE, open_fmu
+    interface = master_interface(scene.master.algorithm)
     fmus: dict[str, FmuInstance] = {}
     for name in scene.components:
         path = resolve_fmu(scene, name, fmu_dir, model_exchange=interface == MODEL_EXCHANGE)
@@ -383,7 +382,7 @@ def estimate_run(scene, run_series: tuple, fmu_dir=None, pending: list | None = 
 def _co_simulation(algorithm: str) -> bool:
     """Does the master co-simulate (step the FMUs), as opposed to integrating their Model
     Exchange interfaces as one ODE?"""
-    return getattr(MASTERS.get(algorithm), "interface", "CoSimulation") == "CoSimulation"
+    return master_interface(algorithm) == "CoSimulation"
 
 
 def plot_roles(scene: Scene) -> dict | None:

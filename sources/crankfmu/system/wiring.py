@@ -59,6 +59,13 @@ def resolve_fmu(scene: Scene, comp_name: str, fmu_dir: Path,
     return path
 
 
+def master_interface(algorithm: str) -> str:
+    """The FMI interface the master steps the FMUs through: "CoSimulation", or "ModelExchange"
+    (the model-exchange master: every FMU's Model Exchange interface, as one ODE)."""
+    from ..masters import MASTERS
+    return getattr(MASTERS.get(algorithm), "interface", "CoSimulation")
+
+
 def _check_fmi_version(scene: Scene, comp_name: str, path: Path) -> None:
     """An FMU file's FMI version is the file's; `fmi = 3` on an FMI 2.0 file is a mistake."""
     from ..fmu.instance3 import is_fmi3
