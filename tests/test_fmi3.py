@@ -29,16 +29,6 @@ from crankfmu.models.catalog import FMU_MODELS, physics_class
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.fixture(scope="session")
-def fmi3_dir(tmp_path_factory) -> Path:
-    """Every catalog model's FMI 3.0 FMU (default effects), built once and validated."""
-    from crankfmu.fmu.build_fmi3 import build_all3
-
-    dest = tmp_path_factory.mktemp("fmus")
-    build_all3(dest)
-    return dest / "fmi3"
-
-
 # -- the FMUs -----------------------------------------------------------------------------------
 @pytest.mark.parametrize("model", list(FMU_MODELS))
 def test_every_model_has_both_interfaces_and_its_states(fmi3_dir, model):
@@ -361,3 +351,53 @@ def test_fmu_state_serialized_and_restored_in_a_new_process_continues_bit_identi
     restored = _state_run("restore", fmu, state, STATE_CASES[model])
     assert restored == saved
     assert saved[0] != saved[-1]  # the outputs move after the save
+
+
+FAILING_INIT3 = r'''
+import sys
+from fmpy import extract, read_model_description
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi3 import FMU3Slave
+path = sys.argv[1]
+md = read_model_description(path)
+vr = {v.name: v.valueReference for v in md.modelVariables}
+s = FMU3Slave(guid=md.guid, unzipDirectory=extract(path),
+              modelIdentifier=md.coSimulation.modelIdentifier, instanceName="press")
+s.instantiate()  # fmpy's default logger prints every message, no debug logging
+s.setFloat64([vr["l"]], [0.01])
+s.enterInitializationMode(startTime=0.0)
+try:
+    s.exitInitializationMode()
+except FMICallException as err:
+    print("exitInitializationMode status", err.status, flush=True)
+try:
+    s.doStep(0.0, 1e-3)
+except FMICallException as err:
+    print("doStep on the failed instance: status", err.status, flush=True)
+s.reset()  # a fresh instance: now with a rod that fits
+s.setFloat64([vr["l"]], [0.25])
+s.enterInitializationMode(startTime=0.0)
+s.exitInitializationMode()
+s.doStep(0.0, 1e-3)
+print("after reset: phi", s.getFloat64([vr["phi"]])[0], flush=True)
+s.terminate()
+s.freeInstance()
+print("freed", flush=True)
+'''
+
+
+def test_fmi3_impossible_parameters_give_fmi3error_then_reset_and_free(fmi3_dir):
+    """The FMI 3.0 launcher as the FMI 2.0 one (test_launcher.py): --set l=0.01 (rod shorter
+    than the crank) ends fmi3ExitInitializationMode with fmi3Error (3), not pythonfmu3's
+    fmi3Fatal, the reason logged; later calls are refused with fmi3Error; fmi3Reset gives a
+    working instance; fmi3FreeInstance returns and the process exits with 0."""
+    done = subprocess.run([sys.executable, "-c", FAILING_INIT3,
+                           str(fmi3_dir / "StephensonPress.fmu")],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stdout + done.stderr
+    out = done.stdout.splitlines()
+    assert "exitInitializationMode status 3" in out
+    assert "doStep on the failed instance: status 3" in out
+    assert any("parameter l = 0.01 is not allowed" in line for line in out), done.stdout
+    assert not any(line.startswith("[FATAL]") for line in out), done.stdout
+    assert any(line.startswith("after reset: phi") for line in out) and out[-1] == "freed"
