@@ -143,7 +143,8 @@ def _repack(built: Path, target: Path, model_name: str, slave_class, digest: str
         for info in z.infolist():
             if info.filename != "modelDescription.xml" and not info.is_dir():
                 entries[info.filename] = z.read(info)
-    entries["modelDescription.xml"] = model_description(slave_class, digest)
+    entries["modelDescription.xml"] = model_description(
+        slave_class, digest, (launcher.host_requirements(), launcher.SEARCH_TEXT))
     entries["documentation/index.html"] = model_card_html(model_name).encode()
     _package_launcher(entries, slave_class.physics_class.model_name)
     with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as z:
