@@ -199,15 +199,19 @@ def build_all(dest: Path, names=None, check: bool = True) -> list[Path]:
     built = []
     for name in names or FMU_MODELS:
         path = build_fmu(name, dest)
-        problems = validate(path) if check else []
-        status = "ok" if not problems else f"{len(problems)} problem(s)"
-        print(f"built {path} ({path.stat().st_size // 1024} KiB): fmpy validate {status}")
-        for p in problems:
-            print(f"  - {p}")
-        if problems:
-            raise SystemExit(f"fmpy validate found problems in {path}")
+        report(path, validate(path) if check else [])
         built.append(path)
     return built
+
+
+def report(path: Path, problems: list[str]) -> None:
+    """Say what was built and what fmpy validate found; stop when it found anything."""
+    status = "ok" if not problems else f"{len(problems)} problem(s)"
+    print(f"built {path} ({path.stat().st_size // 1024} KiB): fmpy validate {status}")
+    for p in problems:
+        print(f"  - {p}")
+    if problems:
+        raise SystemExit(f"fmpy validate found problems in {path}")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -27,7 +27,8 @@ from pathlib import Path
 
 from ..models.catalog import FMU_MODELS, physics_class
 from . import launcher
-from .build import PACKAGE_DIR, RUNTIME_INIT, ZIP_DATE, model_card_html, runtime_files, validate
+from .build import (PACKAGE_DIR, RUNTIME_INIT, ZIP_DATE, model_card_html, report, runtime_files,
+                    validate)
 from .model_description import model_description_fmi3, sources_digest
 
 FMI3_DIR = "fmi3"  # under the FMU folder: fmus/fmi3/
@@ -224,15 +225,6 @@ def build_all3(dest: Path, names=None, check: bool = True) -> list[Path]:
         report(path, validate(path) if check else [])
         built.append(path)
     return built
-
-
-def report(path: Path, problems: list[str]) -> None:
-    status = "ok" if not problems else f"{len(problems)} problem(s)"
-    print(f"built {path} ({path.stat().st_size // 1024} KiB): fmpy validate {status}")
-    for p in problems:
-        print(f"  - {p}")
-    if problems:
-        raise SystemExit(f"fmpy validate found problems in {path}")
 
 
 # -- the build command (python build.py, crankfmu build): FMI 2.0 and FMI 3.0 ---------------------

@@ -18,7 +18,7 @@ from fmpy import read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi3 import FMU3Model, FMU3Slave, fmi3Boolean, fmi3Float64, fmi3ValueReference
 
-from .instance import StepStatistics, check_model_description_xml, extract_fmu
+from .instance import FmuInstance, StepStatistics, check_model_description_xml, extract_fmu
 
 FMI3_WARNING = 1  # fmi3Status: a call returning more than fmi3Warning failed
 CO_SIMULATION, MODEL_EXCHANGE = "CoSimulation", "ModelExchange"
@@ -32,9 +32,10 @@ def is_fmi3(path: Path) -> bool:
     return b'fmiVersion="3.' in head
 
 
-class _LifeCycle:
-    """`slave` as the runner and the masters call it (enter/exitInitializationMode); anything
-    else goes to fmpy's FMU object."""
+class _Fmi3Calls:
+    """fmpy's FMI 3.0 object under the names FmuInstance and the runner call (the FMI 2.0
+    ones): enter/exitInitializationMode (the experiment kept by `setup`), setReal,
+    fmi2FreeInstance; anything else is fmpy's own."""
 
     def __init__(self, owner: "Fmu3Instance"):
         self._owner = owner
@@ -44,15 +45,20 @@ class _LifeCycle:
         self._owner.fmu.enterInitializationMode(tolerance=tolerance, startTime=start,
                                                 stopTime=stop)
 
-    def exitInitializationMode(self):
-        self._owner.fmu.exitInitializationMode()
+    def setReal(self, vrs, values):
+        self._owner.fmu.setFloat64(vrs, values)
+
+    def fmi2FreeInstance(self, component):
+        self._owner.fmu.fmi3FreeInstance(component)
 
     def __getattr__(self, name):
         return getattr(self._owner.fmu, name)
 
 
-class Fmu3Instance:
-    """One instantiated FMI 3.0 FMU in a scene, as Co-Simulation or as Model Exchange."""
+class Fmu3Instance(FmuInstance):
+    """One instantiated FMI 3.0 FMU in a scene, as Co-Simulation or as Model Exchange: an
+    FmuInstance (variables, start values, terminate, FMU state as there) whose calls go to
+    fmpy's FMU3Slave or FMU3Model."""
 
     fmi_version = 3
 
@@ -71,7 +77,7 @@ class Fmu3Instance:
         cls = FMU3Slave if interface == CO_SIMULATION else FMU3Model
         self.fmu = cls(guid=md.guid, unzipDirectory=self.unzip_dir,
                        modelIdentifier=kind.modelIdentifier, instanceName=name)
-        self.slave = _LifeCycle(self)
+        self.slave = _Fmi3Calls(self)
         self.experiment = (0.0, None, None)
         self.stats = StepStatistics()
         self._log = log
@@ -92,32 +98,7 @@ class Fmu3Instance:
     def setup(self, start_time: float, stop_time: float, tolerance: float) -> None:
         self.experiment = (start_time, stop_time, tolerance)
 
-    def terminate(self) -> None:
-        """Terminate and free the instance, keeping the shared library loaded (as
-        FmuInstance.terminate); safe to call twice."""
-        if self._component is None:
-            return
-        component, self._component = self._component, None
-        try:
-            self.fmu.terminate()
-        finally:
-            self.fmu.fmi3FreeInstance(component)
-
     # -- values ----------------------------------------------------------------------------
-    def variable(self, name: str):
-        try:
-            return self.variables[name]
-        except KeyError:
-            raise KeyError(f"{self.name}: no variable {name!r} in {self.path.name}") from None
-
-    def set_start_values(self, values: dict) -> None:
-        for name, value in values.items():
-            var = self.variable(name)
-            if var.type == "Boolean":
-                self.fmu.setBoolean([var.valueReference], [bool(value)])
-            else:
-                self.fmu.setFloat64([var.valueReference], [float(value)])
-
     def value_references(self, names: list[str]):
         return (fmi3ValueReference * len(names))(*[self.variable(v).valueReference
                                                    for v in names])
@@ -165,18 +146,6 @@ class Fmu3Instance:
             raise FMICallException(function="fmi3DoStep", status=status)
         self.stats.do_step_calls += 1
 
-    # -- state rollback --------------------------------------------------------------------
-    def get_state(self):
-        self.stats.state_saves += 1
-        return self.fmu.getFMUState()
-
-    def set_state(self, state) -> None:
-        self.stats.rollbacks += 1
-        self.fmu.setFMUState(state)
-
-    def free_state(self, state) -> None:
-        self.fmu.freeFMUState(state)
-
 
 FMI3_REAL_TYPES = ("Float64", "Float32")
 
@@ -210,7 +179,6 @@ def open_fmu(name: str, path: Path, log=None, interface: str = CO_SIMULATION):
     if interface != CO_SIMULATION:
         raise ValueError(f"an FMI 2.0 FMU; {interface} needs an FMI 3.0 FMU with a "
                          f"<{interface}> interface")
-    from .instance import FmuInstance
     return FmuInstance(name, path, log)
 
 

@@ -11,7 +11,7 @@ import hashlib
 import uuid
 from xml.etree.ElementTree import Element, SubElement, indent, tostring
 
-from ..runtime.slave_core import DEFAULT_TOLERANCE, FmiVariable, derivative_unit, variable_table
+from ..runtime.slave_core import DEFAULT_TOLERANCE, derivative_unit, variable_table
 from .units import base_unit_attributes
 
 
@@ -19,14 +19,19 @@ def _number(x: float) -> str:
     return repr(float(x))
 
 
+def _attributes(vr: int, var) -> dict:
+    """The attributes every version's variable element has."""
+    attrs = {"name": var.name, "valueReference": str(vr), "description": var.description,
+             "causality": var.causality, "variability": var.variability}
+    if var.initial:
+        attrs["initial"] = var.initial
+    return attrs
+
+
 def _variables(root: Element, table) -> None:
     node = SubElement(root, "ModelVariables")
     for vr, var in enumerate(table):
-        attrs = {"name": var.name, "valueReference": str(vr), "description": var.description,
-                 "causality": var.causality, "variability": var.variability}
-        if var.initial:
-            attrs["initial"] = var.initial
-        sv = SubElement(node, "ScalarVariable", attrs)
+        sv = SubElement(node, "ScalarVariable", _attributes(vr, var))
         if var.kind == "Boolean":
             SubElement(sv, "Boolean", {"start": str(bool(var.start)).lower()})
             continue
@@ -42,8 +47,19 @@ def _variables(root: Element, table) -> None:
         SubElement(sv, "Real", real)
 
 
-def _unit_definitions(root: Element, table) -> None:
-    units = sorted({v.unit for v in table if v.unit})
+def _categories_and_experiment(root: Element, slave_class) -> None:
+    """LogCategories and DefaultExperiment, the same in both versions."""
+    cats = SubElement(root, "LogCategories")
+    for name, text in slave_class.log_categories.items():
+        SubElement(cats, "Category", {"name": name, "description": text})
+    SubElement(root, "DefaultExperiment", {
+        "startTime": "0.0", "stopTime": _number(slave_class.default_stop),
+        "stepSize": _number(slave_class.default_step), "tolerance": _number(DEFAULT_TOLERANCE)})
+
+
+def _unit_definitions(root: Element, table, extra=()) -> None:
+    """The units of the table's variables and the `extra` ones."""
+    units = sorted({v.unit for v in table if v.unit} | set(extra))
     node = SubElement(root, "UnitDefinitions")
     for unit in units:
         u = SubElement(node, "Unit", {"name": unit})
@@ -83,12 +99,7 @@ def model_description(slave_class, build_id: str, host: tuple[str, str] | None =
         "canBeInstantiatedOnlyOncePerProcess": "false", "canNotUseMemoryManagementFunctions":
             "true", "canGetAndSetFMUstate": "true", "canSerializeFMUstate": "true"})
     _unit_definitions(root, table)
-    cats = SubElement(root, "LogCategories")
-    for name, text in slave_class.log_categories.items():
-        SubElement(cats, "Category", {"name": name, "description": text})
-    SubElement(root, "DefaultExperiment", {
-        "startTime": "0.0", "stopTime": _number(slave_class.default_stop),
-        "stepSize": _number(slave_class.default_step), "tolerance": _number(DEFAULT_TOLERANCE)})
+    _categories_and_experiment(root, slave_class)
     if host is not None:
         host_annotation(SubElement(SubElement(root, "VendorAnnotations"), "Tool",
                                    {"name": HOST_ANNOTATION}), *host)
@@ -125,10 +136,7 @@ def state_units(physics, states) -> list[str | None]:
 def _variables3(root: Element, table, effects_on, states, units, slots: int, layout) -> None:
     node = SubElement(root, "ModelVariables")
     for vr, var in enumerate(table):
-        attrs = {"name": var.name, "valueReference": str(vr), "description": var.description,
-                 "causality": var.causality, "variability": var.variability}
-        if var.initial:
-            attrs["initial"] = var.initial
+        attrs = _attributes(vr, var)
         if var.kind == "Boolean":
             start = var.start if not var.name.startswith("effect_") else \
                 var.name[len("effect_"):] in effects_on
@@ -207,15 +215,9 @@ def model_description_fmi3(slave_class, build_id: str, host: tuple[str, str]) ->
                                       "hasEventMode": "false",
                                       "providesIntermediateUpdate": "false"})
     units = state_units(physics, states)
-    _unit_definitions(root, table + [FmiVariable("", "Real", "", "", None, u, "", None)
-                                     for u in ["s"] + [u for u in units if u] +
-                                     [derivative_unit(u, 1) for u in units if u]])
-    cats = SubElement(root, "LogCategories")
-    for name, text in slave_class.log_categories.items():
-        SubElement(cats, "Category", {"name": name, "description": text})
-    SubElement(root, "DefaultExperiment", {
-        "startTime": "0.0", "stopTime": _number(slave_class.default_stop),
-        "stepSize": _number(slave_class.default_step), "tolerance": _number(DEFAULT_TOLERANCE)})
+    _unit_definitions(root, table, ["s"] + [u for u in units if u] +
+                      [derivative_unit(u, 1) for u in units if u])
+    _categories_and_experiment(root, slave_class)
     _variables3(root, table, set(slave_class.me_effects), states, units, slots, layout)
     _model_structure3(root, table, layout)
     annotation = SubElement(SubElement(root, "Annotations"), "Annotation",

@@ -87,9 +87,8 @@ typedef struct {
     fmi2Component c;               /* pythonfmu's component */
     fmi2CallbackFunctions host;    /* the host's callbacks */
     fmi2CallbackFunctions mine;    /* given to pythonfmu: our logger, environment = this record */
-    int logging_on, failed;
-    size_t n_categories;
-    char **categories;
+    LogFilter log;                 /* what reaches the host's logger */
+    int failed;
     char *name, *guid, *resources;
     fmi2Type type;
     fmi2Boolean visible;
@@ -123,14 +122,7 @@ static void relay_logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Stat
     /* pythonfmu logs every Python exception as fmi2Fatal; the launcher returns fmi2Error for
      * it (see outcome()), and the message says the same */
     if (status == fmi2Fatal) status = fmi2Error;
-    int wanted = status >= fmi2Error;
-    if (!wanted && inst->logging_on) {
-        wanted = inst->n_categories == 0;
-        for (size_t i = 0; !wanted && i < inst->n_categories; i++)
-            wanted = (category && !strcmp(category, inst->categories[i])) ||
-                     !strcmp(inst->categories[i], "logAll");
-    }
-    if (!wanted) return;
+    if (!log_wanted(&inst->log, status >= fmi2Error, category)) return;
     if (inst->host.logger)
         inst->host.logger(inst->host.componentEnvironment, name, status, category, "%s",
                           message);
@@ -151,8 +143,7 @@ static int bind_fmi2(char *error, size_t size) {
 }
 
 static void free_record(Instance *inst) {
-    for (size_t i = 0; i < inst->n_categories; i++) free(inst->categories[i]);
-    free(inst->categories);
+    clear_log_filter(&inst->log);
     free(inst->name); free(inst->guid); free(inst->resources);
     free(inst);
 }
@@ -190,7 +181,7 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String 
     inst->mine = *cb;
     inst->mine.logger = relay_logger;
     inst->mine.componentEnvironment = inst;
-    inst->logging_on = logging_on;
+    inst->log.on = logging_on;
     inst->name = copy(name);
     inst->guid = copy(guid);
     inst->resources = copy(resources);
@@ -282,17 +273,7 @@ EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n,
                                       const fmi2String categories[]) {
     Instance *inst = (Instance *)c;
     if (!inst) return fmi2Error;
-    for (size_t i = 0; i < inst->n_categories; i++) free(inst->categories[i]);
-    free(inst->categories);
-    inst->categories = NULL;
-    inst->n_categories = 0;
-    inst->logging_on = on;
-    if (on && n) {
-        inst->categories = calloc(n, sizeof *inst->categories);
-        if (!inst->categories) return fmi2Error;
-        for (size_t i = 0; i < n; i++) inst->categories[i] = copy(categories[i]);
-        inst->n_categories = n;
-    }
+    if (!set_log_filter(&inst->log, on, n, categories)) return fmi2Error;
     return fmi2OK; /* pythonfmu keeps logging everything; relay_logger filters */
 }
 

@@ -80,9 +80,8 @@ typedef struct {
     Kind kind;
     fmi3InstanceEnvironment host_env;
     fmi3LogMessageCallback host_log;
-    int logging_on, failed;
-    size_t n_categories;
-    char **categories;
+    LogFilter log;                 /* what reaches the host's logger */
+    int failed;
     char *name, *token, *resources;
     fmi3Boolean visible;
 } Instance;
@@ -112,21 +111,13 @@ static void relay_logger(fmi3InstanceEnvironment env, fmi3Status status, fmi3Str
     Instance *inst = (Instance *)env;
     if (!inst || !message) return;
     if (status == fmi3Fatal) status = fmi3Error; /* the launcher returns fmi3Error for it */
-    int wanted = status >= fmi3Error;
-    if (!wanted && inst->logging_on) {
-        wanted = inst->n_categories == 0;
-        for (size_t i = 0; !wanted && i < inst->n_categories; i++)
-            wanted = (category && !strcmp(category, inst->categories[i])) ||
-                     !strcmp(inst->categories[i], "logAll");
-    }
-    if (!wanted) return;
+    if (!log_wanted(&inst->log, status >= fmi3Error, category)) return;
     if (inst->host_log) inst->host_log(inst->host_env, status, category, message);
     else fprintf(stderr, "[%s] %s\n", inst->name ? inst->name : "?", message);
 }
 
 static void free_record(Instance *inst) {
-    for (size_t i = 0; i < inst->n_categories; i++) free(inst->categories[i]);
-    free(inst->categories);
+    clear_log_filter(&inst->log);
     free(inst->name); free(inst->token); free(inst->resources);
     free(inst);
 }
@@ -172,7 +163,7 @@ static fmi3Instance instantiate(Kind kind, fmi3String name, fmi3String token,
     inst->kind = kind;
     inst->host_env = env;
     inst->host_log = log;
-    inst->logging_on = logging_on;
+    inst->log.on = logging_on;
     inst->name = copy(name);
     inst->token = copy(token);
     inst->resources = copy(resources);
@@ -254,17 +245,7 @@ EXPORT fmi3Status fmi3SetDebugLogging(fmi3Instance c, fmi3Boolean on, size_t n,
                                       const fmi3String categories[]) {
     Instance *inst = (Instance *)c;
     if (!inst) return fmi3Error;
-    for (size_t i = 0; i < inst->n_categories; i++) free(inst->categories[i]);
-    free(inst->categories);
-    inst->categories = NULL;
-    inst->n_categories = 0;
-    inst->logging_on = on;
-    if (on && n) {
-        inst->categories = calloc(n, sizeof *inst->categories);
-        if (!inst->categories) return fmi3Error;
-        for (size_t i = 0; i < n; i++) inst->categories[i] = copy(categories[i]);
-        inst->n_categories = n;
-    }
+    if (!set_log_filter(&inst->log, on, n, categories)) return fmi3Error;
     return fmi3OK; /* pythonfmu3 keeps logging everything; relay_logger filters */
 }
 

@@ -451,6 +451,45 @@ static char *copy(const char *s) {
     return c;
 }
 
+/* What an instance passes on to the host's logger: errors always; the other messages when
+ * logging is on, of every category or of those the host named (fmiXSetDebugLogging). */
+typedef struct {
+    int on;
+    size_t n;
+    char **categories;
+} LogFilter;
+
+static int log_wanted(const LogFilter *f, int is_error, const char *category) {
+    if (is_error) return 1;
+    if (!f->on) return 0;
+    if (f->n == 0) return 1;
+    for (size_t i = 0; i < f->n; i++)
+        if ((category && !strcmp(category, f->categories[i])) ||
+            !strcmp(f->categories[i], "logAll"))
+            return 1;
+    return 0;
+}
+
+static void clear_log_filter(LogFilter *f) {
+    for (size_t i = 0; i < f->n; i++) free(f->categories[i]);
+    free(f->categories);
+    f->categories = NULL;
+    f->n = 0;
+}
+
+/* 0 when out of memory */
+static int set_log_filter(LogFilter *f, int on, size_t n, const char *const categories[]) {
+    clear_log_filter(f);
+    f->on = on;
+    if (on && n) {
+        f->categories = calloc(n, sizeof *f->categories);
+        if (!f->categories) return 0;
+        for (size_t i = 0; i < n; i++) f->categories[i] = copy(categories[i]);
+        f->n = n;
+    }
+    return 1;
+}
+
 /* Everything before the first instance: configuration, Python, pre-flight, pythonfmu's binary. */
 static int prepare(const char *resources_dir, const char *suffix, const char *platform_dir,
                    Config *cfg, char *error, size_t size) {
