@@ -211,7 +211,7 @@ def cmd_build(args) -> int:
                                        PACKAGE_DIR)
     from .system.wiring import warn_if_tree_differs
     warn_if_tree_differs(Path.cwd())
-    build_selected(args)
+    build_selected(args.dest, args.models, args.fmi, args.effects, args.portable)
     return 0
 
 

@@ -246,22 +246,23 @@ def add_arguments(parser) -> None:
                              "on PATH")
 
 
-def build_selected(args) -> list[Path]:
-    """What add_arguments' options ask for; returns the FMU files."""
+def build_selected(dest: Path, models=None, fmi: str = "both", effects: str | None = None,
+                   portable: bool = False) -> list[Path]:
+    """What add_arguments' options ask for (models None: all); returns the FMU files."""
     from .build import build_all
 
-    launcher.set_portable(args.portable)
+    launcher.set_portable(portable)
     built = []
-    if args.fmi in ("2", "both"):
-        built += build_all(args.dest, args.models or None)
-    if args.fmi in ("3", "both"):
-        if args.effects is None:
-            built += build_all3(args.dest, args.models or None)
+    if fmi in ("2", "both"):
+        built += build_all(dest, models or None)
+    if fmi in ("3", "both"):
+        if effects is None:
+            built += build_all3(dest, models or None)
         else:
-            effects = [] if args.effects == "none" else \
-                [e.strip() for e in args.effects.split(",") if e.strip()]
-            for name in args.models or FMU_MODELS:
-                path = build_fmu3(name, Path(args.dest) / FMI3_DIR, effects)
+            chosen = [] if effects == "none" else [e.strip() for e in effects.split(",")
+                                                   if e.strip()]
+            for name in models or FMU_MODELS:
+                path = build_fmu3(name, Path(dest) / FMI3_DIR, chosen)
                 report(path, validate(path))
                 built.append(path)
     return built
@@ -273,4 +274,5 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description="Build every crankfmu FMU (FMI 2.0 into fmus/, "
                                                  "FMI 3.0 into fmus/fmi3/) and validate it")
     add_arguments(parser)
-    build_selected(parser.parse_args(argv))
+    args = parser.parse_args(argv)
+    build_selected(args.dest, args.models, args.fmi, args.effects, args.portable)

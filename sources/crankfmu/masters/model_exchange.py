@@ -285,7 +285,7 @@ class ModelExchange(Master):
         t_root = float(sol.t_events[i][0])
         t_before = sol.t[-2] if len(sol.t) > 1 else sol.t[0]
         before = np.sign(self.indicators(t_before, sol.sol(t_before))[i])
-        distance = 4.0 * math.ulp(max(abs(t_root), 1e-300))
+        distance = 4.0 * math.ulp(max(abs(t_root), 1.0))  # ~1e-15 s, doubled until past
         t = t_root
         for _ in range(PAST_CROSSING_TRIES):
             if t > t_end:

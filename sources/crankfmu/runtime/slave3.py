@@ -40,7 +40,7 @@ from pythonfmu3.modelexchange import ModelExchange
 from .model import IntegrationError
 from .slave_core import DEFAULT_TOLERANCE, SlaveCore
 
-# fmi3EnterInitializationMode's startTime and tolerance, set by crankfmu's launcher (launcher.c)
+# fmi3EnterInitializationMode's startTime and tolerance, set by crankfmu's launcher (launcher3.c)
 # right before it forwards that call; not variables of the modelDescription
 EXPERIMENT_VRS = (1 << 30, (1 << 30) + 1)
 PADDING = 1.0  # the value of an event-indicator slot the current mode does not use
