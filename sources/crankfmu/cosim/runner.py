@@ -382,7 +382,8 @@ def estimate_run(scene, run_series: tuple, fmu_dir=None, pending: list | None = 
 def _co_simulation(algorithm: str) -> bool:
     """Does the master co-simulate (step the FMUs), as opposed to integrating their Model
     Exchange interfaces as one ODE?"""
-    return master_interface(algorithm) == "CoSimulation"
+    from ..fmu.instance3 import CO_SIMULATION
+    return master_interface(algorithm) == CO_SIMULATION
 
 
 def plot_roles(scene: Scene) -> dict | None:

@@ -32,7 +32,7 @@ import numpy as np
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi3 import fmi3Boolean, fmi3Float64
 
-from ..fmu.instance3 import feedthrough
+from ..fmu.instance3 import MODEL_EXCHANGE, feedthrough
 from .base import Master
 from .history import History
 from .inputs import edge_reading_time
@@ -73,7 +73,7 @@ class MePart:
     prepared ctypes buffers."""
 
     def __init__(self, comp: str, fmu, offset: int):
-        if getattr(fmu, "interface", None) != "ModelExchange":
+        if getattr(fmu, "interface", None) != MODEL_EXCHANGE:
             raise ValueError(f"component {comp}: {fmu.path.name} is not loaded as a Model "
                              f"Exchange FMU (the model-exchange master needs FMI 3.0 FMUs with "
                              f"<ModelExchange>)")
@@ -167,7 +167,7 @@ def evaluation_plan(system) -> list[str]:
 
 class ModelExchange(Master):
     name = "model-exchange"
-    interface = "ModelExchange"  # the runner loads every component's FMU for Model Exchange
+    interface = MODEL_EXCHANGE  # the runner loads every component's FMU for Model Exchange
     options = (RTOL,)
 
     def __init__(self, system, settings):

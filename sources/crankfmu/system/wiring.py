@@ -16,7 +16,7 @@ import numpy as np
 
 from .scene import Scene, SceneError
 from ..fmu.instance import FmuInstance
-from ..fmu.instance3 import feedthrough, value_type
+from ..fmu.instance3 import CO_SIMULATION, feedthrough, value_type
 
 log = logging.getLogger(__name__)
 
@@ -63,7 +63,7 @@ def master_interface(algorithm: str) -> str:
     """The FMI interface the master steps the FMUs through: "CoSimulation", or "ModelExchange"
     (the model-exchange master: every FMU's Model Exchange interface, as one ODE)."""
     from ..masters import MASTERS
-    return getattr(MASTERS.get(algorithm), "interface", "CoSimulation")
+    return getattr(MASTERS.get(algorithm), "interface", CO_SIMULATION)
 
 
 def _check_fmi_version(scene: Scene, comp_name: str, path: Path) -> None:

@@ -105,8 +105,9 @@ def is_monolithic(algorithm: str) -> bool:
     """A master that integrates the FMUs' Model Exchange interfaces as one ODE (model-exchange):
     it has no communication step or extrapolation to sweep, so the sweep runs it once, at the
     scene's step (its record grid), as the row the co-simulation masters are set against."""
-    from ...masters import MASTERS
-    return getattr(MASTERS.get(algorithm), "interface", "CoSimulation") != "CoSimulation"
+    from ...fmu.instance3 import CO_SIMULATION
+    from ...system.wiring import master_interface
+    return master_interface(algorithm) != CO_SIMULATION
 
 
 def settings_for(scene, algorithms, extrapolations, steps, fmu_tolerances,
