@@ -1,4 +1,8 @@
-"""Build every crankfmu FMU into fmus/ and check each with fmpy validate: python build.py
+"""Build every crankfmu FMU and check each with fmpy validate: python build.py
+
+FMI 2.0 Co-Simulation into fmus/, FMI 3.0 Co-Simulation + Model Exchange into fmus/fmi3/
+(`--fmi 2|3|both`, `--effects` for FMI 3.0's Model Exchange states, `--portable`: see
+`python build.py --help`).
 
 Builds from this tree's sources/ (and says so). If another crankfmu is installed (pip install .,
 not -e), `crankfmu run` would rebuild the FMUs from that installed copy ("sources changed"):
@@ -12,7 +16,7 @@ _installed = importlib.util.find_spec("crankfmu")  # before this tree goes on sy
 sys.path.insert(0, str(TREE / "sources"))
 
 from crankfmu.system.wiring import tree_differences  # noqa: E402
-from crankfmu.fmu.build import main  # noqa: E402
+from crankfmu.fmu.build_fmi3 import main  # noqa: E402
 
 if __name__ == "__main__":
     print(f"building from the sources at {TREE / 'sources' / 'crankfmu'}")

@@ -46,6 +46,17 @@ def fmu_dir(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="session")
+def fmi3_dir(tmp_path_factory) -> Path:
+    """Every catalog model's FMI 3.0 FMU (Co-Simulation and Model Exchange, default effects),
+    built once for the session and checked with fmpy validate."""
+    from crankfmu.fmu.build_fmi3 import build_all3
+
+    dest = tmp_path_factory.mktemp("fmus")
+    build_all3(dest)
+    return dest / "fmi3"
+
+
+@pytest.fixture(scope="session")
 def catalog(fmu_dir) -> dict[str, Path]:
     """model name -> the session's FMU file (new models are picked up automatically)."""
     from crankfmu.models.catalog import FMU_MODELS

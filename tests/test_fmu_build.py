@@ -4,6 +4,7 @@ from __future__ import annotations
 import html
 import zipfile
 
+import pytest
 from fmpy import read_model_description
 
 from crankfmu.fmu.build import build_fmu, validate
@@ -51,16 +52,20 @@ def test_building_twice_gives_identical_files(tmp_path):
     assert first.read_bytes() == second.read_bytes()
 
 
-def test_an_fmu_bundles_the_runtime_and_its_model_folder_only(fmu_dir):
+@pytest.mark.parametrize("version", [2, 3])
+def test_an_fmu_bundles_the_runtime_and_its_model_folder_only(fmu_dir, fmi3_dir, version):
     """StephensonPress.fmu: runtime/ and models/stephenson_press/, nothing of the catalog, the
-    other models, the analyses or the runner (they would be dead weight and rebuild causes)."""
+    other models, the analyses or the runner (they would be dead weight and rebuild causes);
+    of the two FMI adapters only its own version's (the other's library is not in the FMU)."""
     from crankfmu.fmu.build import PACKAGE_DIR
-    with zipfile.ZipFile(fmu_dir / "StephensonPress.fmu") as z:
+    folder = fmu_dir if version == 2 else fmi3_dir
+    with zipfile.ZipFile(folder / "StephensonPress.fmu") as z:
         bundled = {n.split("/", 2)[2] for n in z.namelist()
                    if n.startswith("resources/crankfmu_rt_") and n.endswith(".py")}
     expected = {p.relative_to(PACKAGE_DIR).as_posix() for folder in ("runtime",
                 "models/stephenson_press") for p in (PACKAGE_DIR / folder).glob("*.py")}
-    assert bundled == expected | {"__init__.py", "models/__init__.py"}
+    other = {2: "runtime/slave3.py", 3: "runtime/slave.py"}[version]
+    assert bundled == (expected - {other}) | {"__init__.py", "models/__init__.py"}
 
 
 def test_an_edit_to_one_model_changes_only_its_build_id(tmp_path, monkeypatch):

@@ -268,3 +268,95 @@ def test_bare_host_with_no_python_there_fails_at_instantiate_saying_so(bare_host
     _, _, stderr = run_host(bare_host, config, tmp_path, env=env, returncode=2)
     message = next(line for line in stderr.splitlines() if "fmi2Instantiate:" in line)
     assert f"CRANKFMU_PYTHON gives {nowhere}: no python executable there" in message, message
+
+
+# -- FMUs that travel: the launcher's search for Python when the builder's is not there -----------
+@pytest.fixture(scope="module")
+def portable_motor(tmp_path_factory) -> Path:
+    """The DC motor built portable: no builder's python recorded in the FMU."""
+    from crankfmu.fmu import launcher
+    from crankfmu.fmu.build import build_fmu
+
+    launcher.set_portable(True)
+    try:
+        fmu = build_fmu("DcServoMotor", tmp_path_factory.mktemp("portable"))
+    finally:
+        launcher.set_portable(False)
+    import zipfile
+    config = zipfile.ZipFile(fmu).read("resources/crankfmu_launcher.txt").decode()
+    assert "python =" not in config and "python_version = " in config
+    return fmu
+
+
+def test_a_portable_fmu_finds_python_on_path(bare_host, portable_motor, tmp_path):
+    """No builder's environment in the FMU, no CRANKFMU_PYTHON, an empty environment: the
+    launcher takes the first suitable python on PATH (this environment's bin first) and the
+    numbers are fmpy's in this process, bit for bit."""
+    config = [fmu_line("m", portable_motor, tmp_path), f"step {1e-3!r}", f"steps {N_STEPS}",
+              f"tolerance {1e-8!r}"]
+    md = read_model_description(str(portable_motor))
+    outs = real_outputs(md)
+    config += [f"output 0 {v.valueReference} m.{v.name}" for v in outs]
+    env = {**BARE_ENV, "PATH": f"{Path(sys.executable).parent}:/usr/bin:/bin"}
+    names, rows, _ = run_host(bare_host, config, tmp_path, env=env)
+    _, ref = fmpy_reference(portable_motor, 1e-3, 1e-8, "m")
+    np.testing.assert_array_equal(rows, ref)
+
+
+def test_the_search_says_what_it_tried(bare_host, portable_motor, tmp_path):
+    """A PATH with pythons that will not do: a Python without numpy and scipy (a venv of this
+    Python, made empty), and a python of another version (a script answering 3.9): instantiate
+    fails, and the message names each candidate and why."""
+    import venv
+    empty = tmp_path / "empty_venv"
+    venv.EnvBuilder(with_pip=False, symlinks=True).create(empty)
+    other = tmp_path / "other"
+    other.mkdir()
+    fake = other / "python3"
+    fake.write_text("#!/bin/sh\nprintf '3.9\\n/opt/py39/bin/python3\\n\\n\\n'\n")
+    fake.chmod(0o755)
+    config = [fmu_line("m", portable_motor, tmp_path), "steps 1"]
+    env = {**BARE_ENV, "PATH": f"{empty / 'bin'}:{other}"}
+    _, _, stderr = run_host(bare_host, config, tmp_path, env=env, returncode=2)
+    message = next(line for line in stderr.splitlines() if "fmi2Instantiate:" in line)
+    assert "no suitable Python 3.11 found" in message, message
+    assert f"{empty / 'bin' / 'python3.11'}: Python package(s) missing: numpy" in message
+    assert f"{fake}: is Python 3.9, not 3.11" in message
+    assert "(a portable build: no builder's environment recorded)" in message
+    assert "CRANKFMU_PYTHON" in message  # how to point the FMU at a Python
+
+
+def test_portable_builds_are_byte_identical_wherever_the_builder_lies(tmp_path, monkeypatch):
+    """Two builders whose environments lie elsewhere (sys.executable differs): portable FMUs of
+    both FMI versions are byte-identical; default builds differ only in the `python =` line of
+    resources/crankfmu_launcher.txt."""
+    import zipfile
+
+    from crankfmu.fmu import launcher
+    from crankfmu.fmu.build import build_fmu
+    from crankfmu.fmu.build_fmi3 import build_fmu3
+
+    def build(where: str, portable: bool) -> dict[str, bytes]:
+        monkeypatch.setattr(sys, "executable", f"/{where}/venv/bin/python")
+        launcher.set_portable(portable)
+        try:
+            dest = tmp_path / f"{where}_{portable}"
+            paths = [build_fmu("Rotor", dest), build_fmu3("Rotor", dest / "fmi3")]
+        finally:
+            launcher.set_portable(False)
+        return {str(p.relative_to(dest)): p.read_bytes() for p in paths}
+
+    assert build("home/a", True) == build("srv/b", True)
+    a, b = build("home/a", False), build("srv/b", False)
+    for name in a:
+        files_a, files_b = _unzip(a[name]), _unzip(b[name])
+        differ = [n for n in files_a if files_a[n] != files_b.get(n)]
+        assert differ == ["resources/crankfmu_launcher.txt"], (name, differ)
+        assert b"python = /home/a/venv/bin/python\n" in files_a[differ[0]]
+
+
+def _unzip(data: bytes) -> dict[str, bytes]:
+    import io
+    import zipfile
+    with zipfile.ZipFile(io.BytesIO(data)) as z:
+        return {n: z.read(n) for n in z.namelist()}

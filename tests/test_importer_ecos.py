@@ -202,3 +202,44 @@ def test_servo_press_ssp_in_the_native_ecos_cli_equals_crankfmu_jacobi(jacobi_sc
     # 6 decimals tell the masters apart: Gauss-Seidel at the same step is far from ecos
     gs = gauss_seidel_run(jacobi_scene, fmu_dir, tmp_path)
     assert np.max(np.abs(got["press.w_crank"] - gs.column("press.w_crank")[:n])) > 1e-4
+
+
+# -- FMI 3.0 Co-Simulation in the native ecos (its FMI 3.0 support: fmilibcpp) -------------------
+def test_every_fmi3_fmu_runs_in_the_native_ecos_cli_as_in_fmpy(catalog_fmus, fmi3_dir, ecos_cli,
+                                                              tmp_path):
+    """Every catalog model's FMI 3.0 FMU, unconnected, in one native ecos run from an empty
+    environment (the FMI 3.0 launcher starts Python): the numbers fmpy gives for the FMI 2.0
+    FMU in this process (FMI 3.0 Co-Simulation equals FMI 2.0 bit for bit: test_fmi3.py), to
+    the 6 decimals ecos prints."""
+    from tests.support.importer_support import step_in_process
+    fmus = {model: fmi3_dir / f"{model}.fmu" for model in FMU_MODELS}
+    got = run_ecos_cli(ecos_cli, _unconnected_ssp(fmus, tmp_path / "catalog3.ssp"), NATIVE_STOP,
+                       tmp_path)
+    for model in FMU_MODELS:
+        names, ref = step_in_process(catalog_fmus / f"{model}.fmu", 1e-3,
+                                     round(NATIVE_STOP / 1e-3), 1e-8, name=model)
+        ref = ref[:len(got["time"])]
+        for k, name in enumerate(names):
+            np.testing.assert_allclose(got[f"{model}.{name}"], ref[:, k + 1], rtol=1e-15,
+                                       atol=CSV_HALF_DIGIT, err_msg=f"{model}.{name} (FMI 3.0)")
+
+
+def test_servo_press_ssp_with_fmi3_components_in_the_native_ecos_cli(jacobi_scene, fmu_dir,
+                                                                   ecos_cli, tmp_path):
+    """The servo press exported with an FMI 3.0 motor and an FMI 2.0 press: the native ecos
+    runs the mixed system as crankfmu's Jacobi master runs the FMI 2.0 scene, to the 6 printed
+    decimals."""
+    from crankfmu.system.ssp_export import export_ssp
+    rec = run_scene(jacobi_scene, RunOptions(out=None, fmu_dir=fmu_dir, progress=False)).recorder
+    jacobi_scene.components["motor"].fmi = 3
+    try:
+        ssp = export_ssp(jacobi_scene, tmp_path / "servo_press_fmi3.ssp", fmu_dir)
+    finally:
+        jacobi_scene.components["motor"].fmi = 2
+    got = run_ecos_cli(ecos_cli, ssp, jacobi_scene.stop_time, tmp_path, "--parameterSet",
+                       jacobi_scene.name)
+    n = len(got["time"])
+    assert n == len(rec.rows) - 1
+    for name in rec.names:
+        np.testing.assert_allclose(got[name], rec.column(name)[:n], rtol=1e-15,
+                                   atol=CSV_HALF_DIGIT, err_msg=name)

@@ -126,7 +126,8 @@ def test_launcher_compile_is_deterministic():
 
     if launcher.find_compiler() is None:
         pytest.skip("no C compiler")
-    source = launcher.SOURCE.read_bytes()
-    first = launcher._compile(tuple(launcher.find_compiler()), source)
-    launcher._compile.cache_clear()
-    assert launcher._compile(tuple(launcher.find_compiler()), source) == first
+    for version in (2, 3):
+        sources = launcher.sources(version)
+        first = launcher._compile(tuple(launcher.find_compiler()), sources)
+        launcher._compile.cache_clear()
+        assert launcher._compile(tuple(launcher.find_compiler()), sources) == first

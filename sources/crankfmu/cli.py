@@ -204,13 +204,14 @@ def _print_run(scene, result, estimate=None) -> None:
 def cmd_build(args) -> int:
     import logging
 
-    from .fmu.build import PACKAGE_DIR, build_all
+    from .fmu.build import PACKAGE_DIR
+    from .fmu.build_fmi3 import build_selected
 
     logging.getLogger("crankfmu").info("building FMUs from the crankfmu sources at %s",
                                        PACKAGE_DIR)
     from .system.wiring import warn_if_tree_differs
     warn_if_tree_differs(Path.cwd())
-    build_all(args.dest, args.models or None)
+    build_selected(args.dest, args.models, args.fmi, args.effects, args.portable)
     return 0
 
 
@@ -273,8 +274,9 @@ def build_parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="run a scene")
     _add_run_options(run)
     run.set_defaults(func=cmd_run)
-    build = sub.add_parser("build", help="build every FMU into fmus/ and validate it")
-    from .fmu.build import add_arguments
+    build = sub.add_parser("build", help="build every FMU into fmus/ (FMI 2.0) and fmus/fmi3/ "
+                                         "(FMI 3.0) and validate it")
+    from .fmu.build_fmi3 import add_arguments
     add_arguments(build)
     build.set_defaults(func=cmd_build)
     from . import commands

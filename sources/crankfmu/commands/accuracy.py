@@ -118,7 +118,8 @@ def _print_estimates(outcomes) -> None:
     from ..studies.accuracy.estimates import estimate_ratio
     ratios = [r for r in (estimate_ratio(o) for o in outcomes) if r == r]
     inside = sum(1 for r in ratios if 1 / 3 <= r <= 3)
-    completed = sum(1 for o in outcomes if o.ok)
+    from ..studies.accuracy.sweep import is_monolithic
+    completed = sum(1 for o in outcomes if o.ok and not is_monolithic(o.setting.algorithm))
     print(f"error estimate (Richardson, companion runs): within a factor 3 of the true error in "
           f"{inside} of {completed} completed runs" + (
               f" (estimate / error from {min(ratios):.2g} to {max(ratios):.2g})" if ratios

@@ -20,7 +20,7 @@ from ..masters.inputs import split_at_edges, step_edges
 from .results import (Recorder, column_units, normalize_unit, plot, versions, write_csv,
                       write_sidecar)
 from ..system.wiring import (System, check_components, check_links, check_loops, check_physics,
-                             default_fmu_dir, resolve_fmu)
+                             default_fmu_dir, master_interface, resolve_fmu)
 
 
 class RunError(CrankfmuError, RuntimeError):
@@ -82,11 +82,15 @@ class RunOptions:
 
 
 def load_fmus(scene: Scene, fmu_dir: Path, log: LogCollector) -> dict[str, FmuInstance]:
+    """Every component's FMU, loaded (FMI 2.0 or 3.0, as the file is) for the interface the
+    scene's master steps it through (`interface` of its class: CoSimulation by default)."""
+    from ..fmu.instance3 import MODEL_EXCHANGE, open_fmu
+    interface = master_interface(scene.master.algorithm)
     fmus: dict[str, FmuInstance] = {}
     for name in scene.components:
-        path = resolve_fmu(scene, name, fmu_dir)
+        path = resolve_fmu(scene, name, fmu_dir, model_exchange=interface == MODEL_EXCHANGE)
         try:
-            fmus[name] = FmuInstance(name, path, log)
+            fmus[name] = open_fmu(name, path, log, interface)
         except (OSError, ValueError, KeyError, IndexError, TypeError, AttributeError,
                 zipfile.BadZipFile, etree.LxmlError) as err:  # not an FMU fmpy can read
             close_fmus(fmus)
@@ -329,6 +333,8 @@ def submit_companions(scene, fmu_dir, companions) -> list:
     tenth of a variable-step master's tolerance): [(knob value, Pending)]."""
     from .estimate import companion_knobs, companion_scene
     m = scene.master
+    if not _co_simulation(m.algorithm):
+        return []
     variable = bool(getattr(MASTERS.get(m.algorithm), "variable_step", False))
     knob, _, values = companion_knobs(variable, m.step, m.tolerance)
     return [(v, companions.submit(run_companion, companion_scene(scene, knob, v), fmu_dir))
@@ -343,6 +349,10 @@ def estimate_run(scene, run_series: tuple, fmu_dir=None, pending: list | None = 
     from .estimate import Estimate, companion_knobs, order_rule, richardson, scene_metric
     from .metrics import MetricError
     m = scene.master
+    if not _co_simulation(m.algorithm):
+        return Estimate(reason=f"{m.algorithm} has no coupling error to estimate: the FMUs are "
+                               f"integrated as one ODE, to its solver's tolerance (compare "
+                               f"with `crankfmu reference`)")
     variable = bool(getattr(MASTERS.get(m.algorithm), "variable_step", False))
     knob, ratio, _ = companion_knobs(variable, m.step, m.tolerance)
     try:
@@ -367,6 +377,13 @@ def estimate_run(scene, run_series: tuple, fmu_dir=None, pending: list | None = 
             f"below {FLOOR_FACTOR:g} x fmu_tolerance: the FMUs' own solver error, which a "
             f"companion with the same fmu_tolerance does not see, may be larger")]))
     return est
+
+
+def _co_simulation(algorithm: str) -> bool:
+    """Does the master co-simulate (step the FMUs), as opposed to integrating their Model
+    Exchange interfaces as one ODE?"""
+    from ..fmu.instance3 import CO_SIMULATION
+    return master_interface(algorithm) == CO_SIMULATION
 
 
 def plot_roles(scene: Scene) -> dict | None:

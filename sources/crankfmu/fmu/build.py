@@ -62,11 +62,19 @@ def _package_files(folder: Path) -> list[Path]:
     return sorted(p for p in folder.rglob("*.py") if "__pycache__" not in p.parts)
 
 
-def runtime_files(model_name: str | None) -> list[tuple[str, bytes]]:
+# The runtime's FMI adapters: an FMU bundles its own version's and not the other, whose library
+# (pythonfmu for FMI 2.0, pythonfmu3 for FMI 3.0) it does not carry.
+FMI_ADAPTERS = {2: f"{RUNTIME_DIR}/slave.py", 3: f"{RUNTIME_DIR}/slave3.py"}
+
+
+def runtime_files(model_name: str | None, fmi_version: int = 2) -> list[tuple[str, bytes]]:
     """(path in the bundle, bytes): the runtime and the model's folder (models/<folder>/), with
     models/__init__.py; nothing else of crankfmu (the catalog, the analyses, the runner). With
-    model None, the runtime alone (an FMU whose model is in its entry script)."""
-    paths = _package_files(PACKAGE_DIR / RUNTIME_DIR)
+    model None, the runtime alone (an FMU whose model is in its entry script). The runtime
+    carries the FMI adapter of `fmi_version` only."""
+    other = {path for version, path in FMI_ADAPTERS.items() if version != fmi_version}
+    paths = [p for p in _package_files(PACKAGE_DIR / RUNTIME_DIR)
+             if p.relative_to(PACKAGE_DIR).as_posix() not in other]
     if model_name is not None:
         paths += _package_files(PACKAGE_DIR / "models" / model_folder(model_name))
         paths.append(PACKAGE_DIR / "models" / "__init__.py")
@@ -79,7 +87,7 @@ def current_build_id(model_name: str | None) -> str:
     """Hash of the model's bundled sources: the FMU's version and GUID seed (computed once)."""
     templates = [("<entry script>", ENTRY_SCRIPT.encode()),
                  ("<runtime init>", RUNTIME_INIT.encode()),
-                 ("<launcher>", launcher.SOURCE.read_bytes())]  # changed: a new build
+                 ("<launcher>", launcher.source_bytes(2))]  # changed: a new build
     return sources_digest(runtime_files(model_name) + templates)
 
 
@@ -135,7 +143,8 @@ def _repack(built: Path, target: Path, model_name: str, slave_class, digest: str
         for info in z.infolist():
             if info.filename != "modelDescription.xml" and not info.is_dir():
                 entries[info.filename] = z.read(info)
-    entries["modelDescription.xml"] = model_description(slave_class, digest)
+    entries["modelDescription.xml"] = model_description(
+        slave_class, digest, (launcher.host_requirements(), launcher.SEARCH_TEXT))
     entries["documentation/index.html"] = model_card_html(model_name).encode()
     _package_launcher(entries, slave_class.physics_class.model_name)
     with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as z:
@@ -190,15 +199,19 @@ def build_all(dest: Path, names=None, check: bool = True) -> list[Path]:
     built = []
     for name in names or FMU_MODELS:
         path = build_fmu(name, dest)
-        problems = validate(path) if check else []
-        status = "ok" if not problems else f"{len(problems)} problem(s)"
-        print(f"built {path} ({path.stat().st_size // 1024} KiB): fmpy validate {status}")
-        for p in problems:
-            print(f"  - {p}")
-        if problems:
-            raise SystemExit(f"fmpy validate found problems in {path}")
+        report(path, validate(path) if check else [])
         built.append(path)
     return built
+
+
+def report(path: Path, problems: list[str]) -> None:
+    """Say what was built and what fmpy validate found; stop when it found anything."""
+    status = "ok" if not problems else f"{len(problems)} problem(s)"
+    print(f"built {path} ({path.stat().st_size // 1024} KiB): fmpy validate {status}")
+    for p in problems:
+        print(f"  - {p}")
+    if problems:
+        raise SystemExit(f"fmpy validate found problems in {path}")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

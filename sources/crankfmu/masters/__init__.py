@@ -11,6 +11,7 @@ from .base import DivergenceError, Master
 from .gauss_seidel import GaussSeidel
 from .iterative import Iterative
 from .jacobi import Jacobi
+from .model_exchange import ModelExchange
 from .options import Option, OptionError
 
 MASTERS: dict[str, type[Master]] = {cls.name: cls for cls in (
@@ -18,6 +19,7 @@ MASTERS: dict[str, type[Master]] = {cls.name: cls for cls in (
     Jacobi,
     Iterative,
     Adaptive,
+    ModelExchange,
 )}
 
 

@@ -48,6 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..masters.model_exchange import integration_method
 from ..runtime.model import PhysicsModel
 from ..models.catalog import FMU_MODELS, make_physics, physics_class
 from ..system.scene import Scene, SceneError
@@ -57,7 +58,6 @@ from ..system.scene import Scene, SceneError
 # models' matrix exponential): composing them through derivatives() loses nothing. A physics
 # class may also say so with the attribute advance_integrates_derivatives = True.
 EXACT_ADVANCE = {"rotor.LinearModel"}
-STIFF_RATE = 1e4  # 1/s: fastest eigenvalue above which the composed ODE is solved by Radau
 
 
 class CompositionError(CrankfmuError, ValueError):
@@ -260,20 +260,9 @@ class ComposedModel(PhysicsModel):
                                                                          self.split(x), us)]
 
     def choose_integrator(self, t: float, x: np.ndarray) -> str:
-        """Radau when the Jacobian at (t, x) has a rate above STIFF_RATE (time constants below
-        0.1 ms: an explicit method would need steps that small), else DOP853, which is several
-        times faster at rtol 1e-10 on the non-stiff crank scenes."""
-        if x.size == 0:
-            return "DOP853"
-        f0 = self.derivatives(t, x)
-        jac = np.empty((x.size, x.size))
-        for j in range(x.size):
-            dx = 1e-7 * max(abs(x[j]), 1.0)
-            xp = x.copy()
-            xp[j] += dx
-            jac[:, j] = (self.derivatives(t, xp) - f0) / dx
-        rate = float(np.max(np.abs(np.linalg.eigvals(jac)))) if np.all(np.isfinite(jac)) else 0.0
-        return "Radau" if rate > STIFF_RATE else "DOP853"
+        """Radau or DOP853 by the composed Jacobian's fastest rate at (t, x): the rule the
+        model-exchange master applies to the FMUs' ODE (masters.model_exchange)."""
+        return integration_method(self.derivatives, t, x)
 
     # -- PhysicsModel contract ------------------------------------------------------------------
     def state_names(self):

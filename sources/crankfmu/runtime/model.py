@@ -37,6 +37,10 @@ Optional (hybrid models)
                                    last event left the state must exclude that point, e.g.
                                    from `self.restart_state`, the state the step restarts from).
     on_event(t, x, u, index)       apply the discrete change for event `index`; return new x.
+    event_slots                    the most event_functions + monitor_functions any mode
+                                   returns: the number of event indicators a Model Exchange
+                                   FMU declares (runtime/slave3.py; it fails naming the model
+                                   when a mode returns more).
     discrete_state() / set_discrete_state(d)   JSON-serialisable modes, saved with FMU state
                                    (with solver_state(): the integrator's step size).
     state_nominal()                typical magnitude per state (absolute tolerance = rtol * it).
@@ -171,6 +175,7 @@ class PhysicsModel:
     # advance() overridden only to run the hybrid contract (on_input_change, event_functions,
     # monitor_functions/observe): see the module docstring; the monolithic reference relies on it
     advance_follows_contract: bool = False
+    event_slots: int = 0  # see the module docstring: Model Exchange's event indicators
 
     IN = variable_indices("PhysicsModel", "input", ())
     OUT = variable_indices("PhysicsModel", "output", ())

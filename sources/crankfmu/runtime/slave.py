@@ -1,118 +1,36 @@
-"""A pythonfmu Fmi2Slave around any `PhysicsModel` (the FMI layer; the physics stays apart).
+"""The FMI 2.0 adapter: a pythonfmu Fmi2Slave around any `PhysicsModel` (the physics stays
+apart).
 
-Every FMU of crankfmu is this adapter with a different `physics_class`, so the plumbing
-(variable table, initialization, stepping, state save/restore, error reporting) exists once.
-The variable table below fixes the value references; `crankfmu.fmu.model_description` writes the
-modelDescription.xml from the same table, so the two cannot disagree.
-
-Value references, in this order: parameters, effect switches (`effect_<name>`), inputs, outputs,
-then the input-derivative companions `<input>_d1` and `<input>_d2` (a crankfmu extension, see
-docs/architecture.md "Input extrapolation inside a step"): the first and second time derivative of
-each input at the current time. do_step integrates with the input polynomial
-u(t0 + s) = u + u_d1 s + u_d2 s^2/2 and leaves the input at its value at the step's end (outputs
-at t0 + h then see the input at t0 + h). They start at 0, so a host that ignores them gets a held
-input. They come after the outputs so that adding them left every other value reference
-unchanged; the solver switch `scipy_solver` comes last for the same reason.
-
-Cost: a get/set/doStep here should cost little more than pythonfmu's own call, so the adapter
-works on a flat list of Python values (no numpy for a handful of numbers), computes the outputs
-once per step (eagerly at the end of doStep, where it also checks them; again only if an input
-is set before they are read) and resolves everything by index.
+Every FMI 2.0 FMU of crankfmu is this adapter with a different `physics_class`. The variable
+table, the values, initialization, stepping and the FMU state are the version-free core
+(`slave_core.SlaveCore`, shared with the FMI 3.0 adapter `slave3.py`); this module adds
+pythonfmu's variable registration, setupExperiment and its log status. The value references are
+the core's (`variable_table`); `crankfmu.fmu.model_description` writes the modelDescription.xml
+from the same table, so the two cannot disagree.
 """
 from __future__ import annotations
-
-import math
-from dataclasses import dataclass
 
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
 from pythonfmu.enums import Fmi2Status
 from pythonfmu.default_experiment import DefaultExperiment
 
-from .model import SCIPY_SOLVER, InputPolynomial, IntegrationError, ParameterError, PhysicsModel
+from .slave_core import (DEFAULT_TOLERANCE, FmiVariable, SlaveCore, derivative_unit,
+                         variable_table)
 
-DEFAULT_TOLERANCE = 1e-8  # relative tolerance of the internal solver when the host gives none
-
-
-@dataclass(frozen=True)
-class FmiVariable:
-    name: str
-    kind: str  # "Real" or "Boolean"
-    causality: str  # parameter | input | output
-    variability: str  # fixed | continuous
-    initial: str | None  # exact | calculated | None (inputs)
-    unit: str | None
-    description: str
-    start: float | bool | None
-    min: float | None = None
-    max: float | None = None
-    depends_on: tuple[str, ...] = ()
+__all__ = ["DEFAULT_TOLERANCE", "FmiVariable", "ModelSlave", "derivative_unit",
+           "variable_table"]
 
 
-def variable_table(physics_class: type[PhysicsModel]) -> list[FmiVariable]:
-    """The FMU's variables in value-reference order."""
-    table = [FmiVariable(v.name, "Real", "parameter", "fixed", "exact", v.unit, v.description,
-                         float(v.start), v.min, v.max) for v in physics_class.parameters]
-    table += [FmiVariable(f"effect_{e.name}", "Boolean", "parameter", "fixed", "exact", None,
-                          f"Effect switch: {e.description}", bool(e.default))
-              for e in physics_class.effects]
-    table += [FmiVariable(v.name, "Real", "input", "continuous", None, v.unit, v.description,
-                          float(v.start), v.min, v.max) for v in physics_class.inputs]
-    table += [FmiVariable(v.name, "Real", "output", "continuous", "calculated", v.unit,
-                          v.description, None, v.min, v.max, v.depends_on)
-              for v in physics_class.outputs]
-    table += [FmiVariable(f"{v.name}_d{k}", "Real", "input", "continuous", None,
-                          derivative_unit(v.unit, k),
-                          f"d{k}/dt{k} of {v.name} at the current time (crankfmu input "
-                          f"extrapolation; 0 = input held over the step)", 0.0)
-              for k in (1, 2) for v in physics_class.inputs]
-    table.append(FmiVariable(SCIPY_SOLVER, "Boolean", "parameter", "fixed", "exact", None,
-                             "Integrate with scipy's solve_ivp instead of the built-in "
-                             "Dormand-Prince 5(4) / closed forms (slower; a cross-check)", False))
-    return table
-
-
-def derivative_unit(unit: str | None, order: int) -> str:
-    """The unit of the order-th time derivative: rad/s -> rad/s2, N.m -> N.m/s2."""
-    unit = unit or "1"
-    if unit.endswith("/s"):
-        return f"{unit}{order + 1}"
-    return f"{unit}/s" if order == 1 else f"{unit}/s{order}"
-
-
-class ModelSlave(Fmi2Slave):
+class ModelSlave(SlaveCore, Fmi2Slave):
     """Generic co-simulation slave; subclasses set `physics_class`."""
 
-    physics_class: type[PhysicsModel] = PhysicsModel
-    default_step = 1e-3
-    default_stop = 1.0
-
     def __init__(self, **kwargs):
-        super().__init__(**kwargs)
-        cls = self.physics_class
-        self.modelName = cls.model_name
-        self.description = cls.description
-        self.author = "crankfmu"
+        Fmi2Slave.__init__(self, **kwargs)
+        self._init_core()
         self.default_experiment = DefaultExperiment(0.0, self.default_stop, self.default_step,
                                                     DEFAULT_TOLERANCE)
-        self._table = variable_table(cls)
-        self._values = [v.start if v.start is not None else 0.0 for v in self._table]
-        n_par, n_eff, n_in = len(cls.parameters), len(cls.effects), len(cls.inputs)
-        n_out = len(cls.outputs)
-        self._input_slice = slice(n_par + n_eff, n_par + n_eff + n_in)
-        self._output_slice = slice(self._input_slice.stop, self._input_slice.stop + n_out)
-        self._d1_slice = slice(self._output_slice.stop, self._output_slice.stop + n_in)
-        self._d2_slice = slice(self._d1_slice.stop, self._d1_slice.stop + n_in)
-        self._output_names = [v.name for v in cls.outputs]
-        self._real_vrs = frozenset(vr for vr, v in enumerate(self._table) if v.kind == "Real")
-        self._scipy_vr = len(self._table) - 1  # the solver switch comes last
         for vr, var in enumerate(self._table):
             self._register(vr, var)
-        self._model: PhysicsModel | None = None
-        self._x: list = []
-        self._time = 0.0
-        self._rtol = DEFAULT_TOLERANCE
-        self._atol: list = []
-        self._outputs_stale = True
 
     def _register(self, vr: int, var: FmiVariable) -> None:
         getter = lambda: self._read(vr)  # noqa: E731 - one closure per value reference
@@ -123,140 +41,8 @@ class ModelSlave(Fmi2Slave):
                                     description=var.description, getter=getter,
                                     setter=setter), nested=False)
 
-    # -- values ----------------------------------------------------------------------------
-    def _read(self, vr: int):
-        if self._outputs_stale and self._output_slice.start <= vr < self._output_slice.stop:
-            self._refresh_outputs()
-        return self._values[vr]
+    def _log_error(self, message: str) -> None:
+        self.log(message, Fmi2Status.error)
 
-    def _write(self, vrs, values) -> None:
-        for vr, value in zip(vrs, values):
-            self._values[vr] = value
-        self._outputs_stale = True
-
-    def get_real(self, vrs):
-        if self._outputs_stale:
-            self._refresh_outputs()
-        values, reals = self._values, self._real_vrs
-        if not reals.issuperset(vrs):
-            raise TypeError(f"value references {sorted(set(vrs) - reals)} are not Real")
-        return [values[vr] for vr in vrs]
-
-    def set_real(self, vrs, values):
-        if not self._real_vrs.issuperset(vrs):
-            raise TypeError(f"value references {sorted(set(vrs) - self._real_vrs)} are not Real")
-        self._write(vrs, [float(v) for v in values])
-
-    def get_boolean(self, vrs):
-        return [bool(self._read(vr)) for vr in vrs]
-
-    def set_boolean(self, vrs, values):
-        self._write(vrs, [bool(v) for v in values])
-
-    def _inputs(self) -> list:
-        return self._values[self._input_slice]
-
-    def _build_model(self) -> PhysicsModel:
-        cls = self.physics_class
-        params = {v.name: self._values[i] for i, v in enumerate(cls.parameters)}
-        offset = len(cls.parameters)
-        effects = [e.name for k, e in enumerate(cls.effects) if self._values[offset + k]]
-        model = cls(params, effects)
-        if self._values[self._scipy_vr]:
-            model.solver = "scipy"
-        return model
-
-    def _refresh_outputs(self) -> None:
-        if self._model is None:  # initialization mode: outputs from the current parameters
-            model = self._build_model()
-            x = model.initial_state(self._inputs())
-        else:
-            model, x = self._model, self._x
-        y = model.output_values(self._time, x, self._inputs())
-        self._values[self._output_slice] = list(map(float, y))
-        self._outputs_stale = False
-
-    def _bad_outputs(self) -> list[str]:
-        return [name for name, v in zip(self._output_names, self._values[self._output_slice])
-                if not math.isfinite(v)]
-
-    # -- FMI life cycle --------------------------------------------------------------------
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
-        self._time = float(start_time)
-        if tolerance is not None and tolerance > 0.0:
-            self._rtol = float(tolerance)
-
-    def exit_initialization_mode(self):
-        try:
-            self._model = self._build_model()
-        except (ParameterError, KeyError) as err:
-            self.log(f"{self.instance_name}: {err}", Fmi2Status.error)
-            raise
-        self._x = list(self._model.initial_state(self._inputs()))
-        self._atol = [self._rtol * v for v in self._model.state_nominal()]
-        self._refresh_outputs()
-        bad = self._bad_outputs()
-        if bad:
-            message = f"{self.instance_name}: output {', '.join(bad)} not finite at the start"
-            self.log(message, Fmi2Status.error)
-            raise IntegrationError(message)
-
-    def do_step(self, current_time, step_size):
-        values = self._values
-        d1, d2 = values[self._d1_slice], values[self._d2_slice]
-        u_of_t = InputPolynomial(current_time, values[self._input_slice], d1, d2)
-        t_end = current_time + step_size
-        if self._x:  # a model without states has nothing to integrate
-            if not self._advance(current_time, step_size, u_of_t):
-                return False
-        self._time = t_end
-        if u_of_t.moving:  # the input (and its slope) now stand at the step's end
-            values[self._input_slice] = u_of_t(t_end)
-            values[self._d1_slice] = [a + step_size * b for a, b in zip(d1, d2)]
-        self._refresh_outputs()
-        if not all(map(math.isfinite, values[self._output_slice])):
-            self.log(f"{self.instance_name}: output {', '.join(self._bad_outputs())} not finite "
-                     f"at t = {t_end:.9g} s", Fmi2Status.error)
-            return False
-        return True
-
-    def _advance(self, current_time: float, step_size: float, u_of_t) -> bool:
-        """The states over the step; False (with the reason logged) if that fails."""
-        model = self._model
-        try:
-            x = model.step(current_time, self._x, step_size, u_of_t, self._rtol, self._atol)
-        except Exception as err:  # noqa: BLE001 - an exception must not reach pythonfmu
-            # (it reports fmi2Fatal, and repeated ones have corrupted the shared interpreter)
-            reason = err if isinstance(err, IntegrationError) else \
-                f"{type(err).__name__}: {err}"
-            self.log(f"{self.instance_name}: step at t = {current_time:.9g} s failed: {reason}",
-                     Fmi2Status.error)
-            return False
-        if not all(map(math.isfinite, x)):
-            bad = [n for n, v in zip(model.state_names(), x) if not math.isfinite(v)]
-            self.log(f"{self.instance_name}: state {', '.join(bad)} not finite at "
-                     f"t = {current_time + step_size:.9g} s", Fmi2Status.error)
-            return False
-        self._x = x
-        return True
-
-    # -- state save / restore (internal states, modes and the step size too) --------------
-    def _get_fmu_state(self):
-        model = self._model
-        return {"time": self._time, "x": [float(v) for v in self._x],
-                "values": list(self._values),
-                "discrete": model.discrete_state() if model is not None else {},
-                "solver": model.solver_state() if model is not None else {},
-                "initialized": model is not None}
-
-    def _set_fmu_state(self, state):
-        self._values = list(state["values"])
-        self._time = float(state["time"])
-        self._x = list(state["x"])
-        if state["initialized"] and self._model is None:
-            self._model = self._build_model()
-            self._atol = [self._rtol * v for v in self._model.state_nominal()]
-        if self._model is not None:
-            self._model.set_discrete_state(state["discrete"])
-            self._model.set_solver_state(state["solver"])
-        self._outputs_stale = True
+        self._set_experiment(start_time, tolerance)

@@ -105,17 +105,20 @@ def file_digest(path: Path) -> str:
 def prepare_tasks(tasks: list[RunTask], fmu_dir: Path | None) -> dict[str, Path]:
     """Resolve (and build, once, in the parent) every FMU the tasks need; fill task.fmus.
     Returns digest -> path of the parent's file."""
-    from ..system.wiring import default_fmu_dir, resolve_fmu
+    from ..fmu.instance3 import MODEL_EXCHANGE
+    from ..system.wiring import default_fmu_dir, master_interface, resolve_fmu
 
     files: dict[str, Path] = {}
     resolved: dict[tuple, Path] = {}
     for task in tasks:
         scene = task.scene
         folder = Path(fmu_dir) if fmu_dir else default_fmu_dir(scene)
+        me = master_interface(scene.master.algorithm) == MODEL_EXCHANGE
         for name, comp in scene.components.items():
-            ref = (str(scene.path.parent), comp.fmu, str(folder))
+            ref = (str(scene.path.parent), comp.fmu, str(folder), comp.fmi, me,
+                   tuple(sorted(comp.effects)) if me else ())  # an FMI 3.0 FMU per effects
             if ref not in resolved:
-                resolved[ref] = resolve_fmu(scene, name, folder)
+                resolved[ref] = resolve_fmu(scene, name, folder, model_exchange=me)
             path = resolved[ref]
             digest = file_digest(path)
             files[digest] = path

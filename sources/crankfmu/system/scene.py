@@ -10,7 +10,9 @@
                   adaptive; `crankfmu run --help` lists them); target (a requested global
                   error: `crankfmu run` then chooses master, extrapolation and step)
     [components.NAME]  fmu = "DcServoMotor" (built FMU name) or "path/to/file.fmu",
-                       parameters = {name = value}, effects = ["name", ...]
+                       parameters = {name = value}, effects = ["name", ...],
+                       fmi = 2 | 3 (the FMI version of a catalog FMU: fmus/X.fmu or
+                       fmus/fmi3/X.fmu; default 2; an FMU file's version is the file's)
     [[connections]]    from = "comp.output", to = "comp.input"
     [inputs]           "comp.input" = value | {table = [[t, v], ...], interpolation = "linear"|"step"}
     [record]           variables = ["comp.var", ...], interval [s] (default: the master step)
@@ -47,6 +49,7 @@ class Component:
     fmu: str
     parameters: dict[str, float | bool] = field(default_factory=dict)
     effects: list[str] = field(default_factory=list)
+    fmi: int = 2  # FMI version: 2 or 3 (docs/fmi3.md)
 
 
 @dataclass(frozen=True)
@@ -81,6 +84,7 @@ class InputSignal:
         return float(np.interp(t, self.times, self.values))
 
 
+FMI_VERSIONS = (2, 3)  # [components.X].fmi
 COMMON_MASTER_KEYS = ("algorithm", "step", "fmu_tolerance", "order", "max_steps", "target")
 
 
@@ -335,7 +339,7 @@ def check_run_size(scene: "Scene", key: str = "[master].step") -> None:
 def _parse_component(path, name: str, raw) -> Component:
     key = f"[components.{name}]"
     raw = _table(path, key, raw)
-    _only_keys(path, key, raw, {"fmu", "parameters", "effects", "description"})
+    _only_keys(path, key, raw, {"fmu", "parameters", "effects", "description", "fmi"})
     check_name(path, key, name, "component name")
     if "." in name:
         raise SceneError(path, key, f"a component name holds no dot (\"{name}.x\" would be "
@@ -352,7 +356,11 @@ def _parse_component(path, name: str, raw) -> Component:
         raise SceneError(path, f"{key}.effects", "must be a list of effect names")
     if not isinstance(raw.get("description", ""), str):
         raise SceneError(path, f"{key}.description", "must be a string")
-    return Component(name, raw["fmu"], dict(params), list(effects))
+    fmi = raw.get("fmi", 2)
+    if isinstance(fmi, bool) or fmi not in FMI_VERSIONS:
+        raise SceneError(path, f"{key}.fmi", f"the FMI version of the component's FMU: "
+                                             f"{' or '.join(map(str, FMI_VERSIONS))}, got {fmi!r}")
+    return Component(name, raw["fmu"], dict(params), list(effects), int(fmi))
 
 
 def _parse_input(path, target: str, raw) -> InputSignal:

@@ -22,6 +22,7 @@ from lxml import etree
 
 from ..version import __version__
 from ..errors import MAX_STEPS
+from ..fmu.instance3 import value_type
 from ..fmu.units import base_unit_attributes
 from .scene import Scene
 from ..runtime.slave import DEFAULT_TOLERANCE
@@ -104,7 +105,7 @@ def lossy_parts(scene: Scene, fmus: dict[str, DescribedFmu]) -> list[str]:
     for comp, fmu in fmus.items():
         for name in connector_names(scene, comp, fmu) + list(bound_values(scene, comp, fmu)):
             var = fmu.variables[name]
-            if var.type == "Real" and var.unit and not _unit(var):
+            if value_type(var) == "Real" and var.unit and not _unit(var):
                 notes.append(f"{comp}.{name} is in {var.unit}, which SSP cannot declare (base-unit "
                              "exponents must be integers): written without a unit")
     return list(dict.fromkeys(notes))
@@ -200,10 +201,10 @@ def _component(elements, scene: Scene, comp: str, fmu: DescribedFmu, source: str
             attrs["description"] = var.description
         c = etree.SubElement(connectors, q("ssd", "Connector"), attrs)
         unit = _unit(var)
-        if var.type == "Real" and unit:
+        kind = value_type(var)  # SSP 1.0 knows Real, as FMI 2.0 (FMI 3.0: Float64)
+        if kind == "Real" and unit:
             units.add(unit)
-        etree.SubElement(c, q("ssc", var.type), {"unit": unit} if var.type == "Real" and unit
-                         else {})
+        etree.SubElement(c, q("ssc", kind), {"unit": unit} if kind == "Real" and unit else {})
     bindings = etree.SubElement(node, q("ssd", "ParameterBindings"))
     binding = etree.SubElement(bindings, q("ssd", "ParameterBinding"), type=PARAMETER_SET_TYPE)
     values = etree.SubElement(binding, q("ssd", "ParameterValues"))

@@ -20,6 +20,7 @@ from pathlib import Path, PurePosixPath
 from lxml import etree
 
 from ..fmu.instance import UnsafeXml, check_model_description_xml, parse_safe_xml
+from ..fmu.instance3 import is_fmi3, value_type
 from .scene import Scene, SceneError, parse_scene
 from .ssp_export import (FMU_TYPE, NS, OSP_ANNOTATION, PARAMETER_SET_TYPE, SCENE_ANNOTATION,
                          SSD_NAME, q)
@@ -211,7 +212,8 @@ def _scene_data(path: Path, root, archive: zipfile.ZipFile, folder: Path, budget
             raise SceneError(path, _where(node), f"{node.get('source')}: not a valid FMU: "
                                                  f"{type(err).__name__}: {err}") from None
         variables[name] = {v.name: v for v in md.modelVariables}
-        components[name] = {"fmu": str(fmu_path), "parameters": {}, "effects": []}
+        components[name] = {"fmu": str(fmu_path), "parameters": {}, "effects": [],
+                            "fmi": 3 if is_fmi3(fmu_path) else 2}
     connectors = {n.get("name"): [c.get("name") for c in n.findall("ssd:Connectors/ssd:Connector",
                                                                    NS)]
                   for n in system.findall("ssd:Elements/ssd:Component", NS)}
@@ -332,7 +334,7 @@ def _apply(path, node, component: dict, variables: dict, comp: str, var: str, va
     if var not in variables:
         raise SceneError(path, _where(node), f"{comp} has no variable {var!r}")
     fmu_var = variables[var]
-    if kind != fmu_var.type:
+    if kind != value_type(fmu_var):
         raise SceneError(path, _where(node), f"{comp}.{var} is {fmu_var.type}, the value {kind}")
     if unit and unit != (fmu_var.unit or "1"):
         raise SceneError(path, _where(node), f"unit {unit!r} differs from {comp}.{var}'s unit "

@@ -16,6 +16,7 @@ import numpy as np
 
 from .scene import Scene, SceneError
 from ..fmu.instance import FmuInstance
+from ..fmu.instance3 import CO_SIMULATION, feedthrough, value_type
 
 log = logging.getLogger(__name__)
 
@@ -26,20 +27,28 @@ def default_fmu_dir(scene: Scene) -> Path:
     return beside if (beside.parent / "scenarios").is_dir() else Path("fmus").resolve()
 
 
-def resolve_fmu(scene: Scene, comp_name: str, fmu_dir: Path) -> Path:
-    """A path to the component's FMU; builds catalog FMUs that are missing or stale."""
-    ref = scene.components[comp_name].fmu
+def resolve_fmu(scene: Scene, comp_name: str, fmu_dir: Path,
+                model_exchange: bool = False) -> Path:
+    """A path to the component's FMU; builds catalog FMUs that are missing or stale. A catalog
+    component with fmi = 3 takes fmus/fmi3/<Model>.fmu; `model_exchange` (the model-exchange
+    master) takes every catalog component's FMI 3.0 FMU for its effects (fmu/build_fmi3.py)."""
+    comp = scene.components[comp_name]
+    ref = comp.fmu
     key = f"[components.{comp_name}].fmu"
     if ref.endswith(".fmu"):
         path = (scene.path.parent / ref).resolve()
         if not path.is_file():
             raise SceneError(scene.path, key, f"no FMU file at {path}")
+        _check_fmi_version(scene, comp_name, path)
         return path
     from ..fmu.build import build_fmu, current_build_id
     from ..models.catalog import FMU_MODELS
     if ref not in FMU_MODELS:
         raise SceneError(scene.path, key, f"unknown FMU {ref!r}; known: {', '.join(FMU_MODELS)}"
                                           " or a path ending in .fmu")
+    if comp.fmi == 3 or model_exchange:
+        from ..fmu.build_fmi3 import fmu_for
+        return fmu_for(ref, fmu_dir, comp.effects if model_exchange else None)
     path = fmu_dir / f"{ref}.fmu"
     if not path.is_file() or _build_id(path) != current_build_id(ref):
         from ..fmu.build import PACKAGE_DIR
@@ -48,6 +57,25 @@ def resolve_fmu(scene: Scene, comp_name: str, fmu_dir: Path) -> Path:
         warn_if_tree_differs(scene.path.resolve().parent.parent)
         build_fmu(ref, fmu_dir)
     return path
+
+
+def master_interface(algorithm: str) -> str:
+    """The FMI interface the master steps the FMUs through: "CoSimulation", or "ModelExchange"
+    (the model-exchange master: every FMU's Model Exchange interface, as one ODE)."""
+    from ..masters import MASTERS
+    return getattr(MASTERS.get(algorithm), "interface", CO_SIMULATION)
+
+
+def _check_fmi_version(scene: Scene, comp_name: str, path: Path) -> None:
+    """An FMU file's FMI version is the file's; `fmi = 3` on an FMI 2.0 file is a mistake."""
+    from ..fmu.instance3 import is_fmi3
+    try:
+        version = 3 if is_fmi3(path) else 2
+    except (OSError, KeyError, ValueError, __import__("zipfile").BadZipFile):
+        return  # not an FMU: loading it says why
+    if scene.components[comp_name].fmi == 3 and version != 3:
+        raise SceneError(scene.path, f"[components.{comp_name}].fmi",
+                         f"fmi = 3, but {path.name} is an FMI 2.0 FMU (the file decides)")
 
 
 def tree_differences(other: Path) -> list[str]:
@@ -157,20 +185,21 @@ def check_physics(scene: Scene, fmus: dict[str, FmuInstance]) -> None:
 def _check_value(scene, key, ref: str, var, value) -> None:
     """The value fits the parameter's type (a Boolean takes true/false, a Real a finite
     number: `--set press.m5=true` is not 1 kg) and the range its modelDescription declares."""
-    if var.type == "Boolean":
+    kind = value_type(var)
+    if kind == "Boolean":
         if not isinstance(value, bool):
             raise SceneError(scene.path, key, f"{ref} is a Boolean parameter: true or false, got "
                                               f"{value!r}")
         return
-    if var.type not in ("Real", "Integer"):
+    if kind not in ("Real", "Integer"):
         raise SceneError(scene.path, key, f"{ref} is of type {var.type}; crankfmu sets Real and "
                                           "Boolean parameters only")
     if isinstance(value, bool) or not isinstance(value, (int, float)) or \
             not math.isfinite(value):
-        raise SceneError(scene.path, key, f"{ref} is a {var.type} parameter"
+        raise SceneError(scene.path, key, f"{ref} is a {kind} parameter"
                                           f"{f' [{var.unit}]' if var.unit else ''}: a finite "
                                           f"number, got {value!r}")
-    if var.type == "Integer" and not float(value).is_integer():
+    if kind == "Integer" and not float(value).is_integer():
         raise SceneError(scene.path, key, f"{ref} is an Integer parameter, got {value!r}")
     for bound, ok in (("min", lambda b: value >= b), ("max", lambda b: value <= b)):
         limit = _float_or_none(getattr(var, bound, None))
@@ -197,7 +226,7 @@ def check_links(scene: Scene, fmus: dict[str, FmuInstance]) -> list[Link]:
         dst_comp, dst_var = c.target.split(".", 1)
         src = _check_variable(scene, f"{key}.from", fmus[src_comp], src_var, ("output",))
         dst = _check_variable(scene, f"{key}.to", fmus[dst_comp], dst_var, ("input",))
-        if src.type != dst.type:
+        if value_type(src) != value_type(dst):
             raise SceneError(scene.path, key, f"type mismatch: {c.source} is {src.type}, "
                                               f"{c.target} is {dst.type}")
         if (src.unit or "1") != (dst.unit or "1"):
@@ -212,21 +241,6 @@ def check_links(scene: Scene, fmus: dict[str, FmuInstance]) -> list[Link]:
         _check_variable(scene, "[record].variables", fmus[comp], var,
                         ("output", "input", "parameter", "local"))
     return links
-
-
-def feedthrough(fmu: FmuInstance) -> dict[str, set[str]]:
-    """output -> the inputs it depends on directly, from the modelDescription's
-    ModelStructure/Outputs. An output listed without a `dependencies` attribute, or not listed,
-    depends on every input (FMI 2.0, section 2.2.8)."""
-    md = fmu.model_description
-    inputs = {v.name for v in md.modelVariables if v.causality == "input"}
-    out: dict[str, set[str]] = {v.name: set(inputs) for v in md.modelVariables
-                                if v.causality == "output"}
-    for unknown in md.outputs or []:
-        name = unknown.variable.name
-        if unknown.dependencies is not None:
-            out[name] = {d.name for d in unknown.dependencies if d.name in inputs}
-    return out
 
 
 def algebraic_loops(fmus: dict[str, FmuInstance], links: list[Link]) -> list[list[str]]:

@@ -1,16 +1,22 @@
-"""The native launcher that makes crankfmu's FMUs run in any FMI host (launcher.c).
+"""The native launcher that makes crankfmu's FMUs run in any FMI host (launcher.c for FMI 2.0,
+launcher3.c for FMI 3.0, both on python_host.c).
 
 `package_binary` puts into an FMU's files: the launcher, compiled here with the system C compiler,
-as binaries/linux64/<id>.so; pythonfmu's binary beside it as <id>_pythonfmu.so; and
-resources/crankfmu_launcher.txt, the Python environment recorded at build time (this process's
-python: the environment with numpy, scipy and pythonfmu). Where no C compiler is found the FMU
-keeps pythonfmu's binary alone, which runs only in hosts that provide Python; the build says so
-on stderr and the model card says what it means (`hosting_html`).
+as the platform binary (FMI 2.0 binaries/linux64/<id>.so, FMI 3.0 binaries/x86_64-linux/<id>.so);
+pythonfmu's (pythonfmu3's) binary beside it as <id>_pythonfmu.so (<id>_pythonfmu3.so); and
+resources/crankfmu_launcher.txt: the Python version and packages the FMU needs and, unless the
+build is portable, the builder's python (this process's: the environment with numpy, scipy and
+pythonfmu). Where no C compiler is found the FMU keeps pythonfmu's binary alone, which runs only
+in hosts that provide Python; the build says so on stderr and the model card says what it means
+(`hosting_html`).
 
-The compile is deterministic: the source is compiled from a fixed relative name in a temporary
+The compile is deterministic: the sources are compiled from fixed relative names in a temporary
 folder, without debug information, and stripped (`-s`), so no path or time enters the binary;
-the linker's build-id is a hash of the content. The same source, compiler and flags give the same
-bytes, so two builds on one machine give byte-identical FMUs.
+the linker's build-id is a hash of the content. The same sources, compiler and flags give the
+same bytes. The one line of an FMU that depends on where it was built is `python =` in
+resources/crankfmu_launcher.txt (the builder's interpreter, the launcher's first guess after
+CRANKFMU_PYTHON); a portable build (`python build.py --portable`, `set_portable(True)`) leaves
+it out, so its FMUs are byte-identical wherever the builder's environment lies.
 """
 from __future__ import annotations
 
@@ -25,13 +31,20 @@ import sysconfig
 import tempfile
 from pathlib import Path
 
-SOURCE = Path(__file__).resolve().parent / "launcher.c"
+HERE = Path(__file__).resolve().parent
+SOURCE = HERE / "launcher.c"        # FMI 2.0
+SOURCE3 = HERE / "launcher3.c"      # FMI 3.0
+SHARED = HERE / "python_host.c"     # included by both
+MAIN_SOURCE = {2: SOURCE, 3: SOURCE3}
+PLATFORM_DIR = {2: "linux64", 3: "x86_64-linux"}
+REAL_SUFFIX = {2: "pythonfmu", 3: "pythonfmu3"}  # <id>_<suffix>.so: the library's own binary
 CONFIG_NAME = "crankfmu_launcher.txt"
 REQUIRES = ("numpy", "scipy")  # what the bundled runtime imports beyond the standard library
 OVERRIDE = "CRANKFMU_PYTHON"
 LIB_OVERRIDE = "CRANKFMU_LIBPYTHON"
 FLAGS = ["-O2", "-shared", "-fPIC", "-fvisibility=hidden", "-s", "-Wall", "-Wextra"]
 _WARNED: list[bool] = []  # the warning once per process
+_PORTABLE: list[bool] = [False]  # a portable build records no builder's python
 TESTED_HOSTS = (
     "fmpy (simulate_fmu and crankfmu's runner), libcosim (libcosimpy), ecos (ecospy and the "
     "native `ecos` command-line simulator shipped in the ecospy wheel, run from an empty "
@@ -50,18 +63,39 @@ def find_compiler() -> list[str] | None:
     return None
 
 
-@functools.lru_cache(maxsize=4)
-def _compile(compiler: tuple[str, ...], source: bytes) -> bytes:
+def set_portable(portable: bool) -> None:
+    """Portable builds leave the builder's python out of resources/crankfmu_launcher.txt: the
+    FMUs are then byte-identical wherever the builder's environment lies, and the launcher
+    finds Python by CRANKFMU_PYTHON or on PATH only."""
+    _PORTABLE[0] = bool(portable)
+
+
+def sources(fmi_version: int = 2) -> tuple[tuple[str, bytes], ...]:
+    """(file name, bytes) of the launcher of `fmi_version`: its main file first, then the shared
+    part it includes."""
+    main = MAIN_SOURCE[fmi_version]
+    return ((main.name, main.read_bytes()), (SHARED.name, SHARED.read_bytes()))
+
+
+def source_bytes(fmi_version: int = 2) -> bytes:
+    """Everything the launcher is compiled from (a build id hashes it: a change rebuilds)."""
+    return b"".join(name.encode() + b"\0" + data for name, data in sources(fmi_version))
+
+
+@functools.lru_cache(maxsize=8)
+def _compile(compiler: tuple[str, ...], files: tuple[tuple[str, bytes], ...]) -> bytes:
+    """The shared object compiled from `files` (the first is the main file)."""
     with tempfile.TemporaryDirectory(prefix="crankfmu_launcher_") as tmp:
-        (Path(tmp) / "launcher.c").write_bytes(source)
-        cmd = [*compiler, *FLAGS, "-o", "launcher.so", "launcher.c", "-ldl", "-lpthread"]
+        for name, data in files:
+            (Path(tmp) / name).write_bytes(data)
+        cmd = [*compiler, *FLAGS, "-o", "launcher.so", files[0][0], "-ldl", "-lpthread"]
         done = subprocess.run(cmd, cwd=tmp, capture_output=True, text=True)
         if done.returncode != 0:
             raise SystemExit(f"compiling the FMU launcher failed: {' '.join(cmd)}\n{done.stderr}")
         return (Path(tmp) / "launcher.so").read_bytes()
 
 
-def compile_launcher() -> bytes | None:
+def compile_launcher(fmi_version: int = 2) -> bytes | None:
     """The launcher's bytes, or None (with a warning on stderr) when no C compiler is found."""
     compiler = find_compiler()
     if compiler is None:
@@ -74,75 +108,82 @@ def compile_launcher() -> bytes | None:
               "interpreter themselves; native hosts (ecos CLI, OMSimulator, Dymola, cosim) "
               "crash on load. Install a C compiler and build again.", file=sys.stderr)
         return None
-    return _compile(tuple(compiler), SOURCE.read_bytes())
+    return _compile(tuple(compiler), sources(fmi_version))
 
 
-def libpython_path() -> str:
-    """This Python's shared libpython, or '' (a static build: the launcher then searches the
-    loader's path for libpython<version>.so.1.0)."""
-    cfg = sysconfig.get_config_var
-    for folder in dict.fromkeys(filter(None, [cfg("LIBDIR"), cfg("LIBPL")])):
-        for name in filter(None, [cfg("INSTSONAME"), cfg("LDLIBRARY")]):
-            if name.endswith(".so") or ".so." in name:
-                path = Path(folder) / name
-                if path.exists():
-                    return str(path)
-    return ""
+def python_version() -> str:
+    return sysconfig.get_config_var("py_version_short") or \
+        f"{sys.version_info[0]}.{sys.version_info[1]}"
 
 
 def launcher_config(model_identifier: str) -> bytes:
-    """resources/crankfmu_launcher.txt: what the launcher reads at fmi2Instantiate."""
-    version = sysconfig.get_config_var("py_version_short") or \
-        f"{sys.version_info[0]}.{sys.version_info[1]}"
+    """resources/crankfmu_launcher.txt: what the launcher reads at instantiation."""
     lines = [
-        "# crankfmu FMU launcher: the Python environment recorded at build time.",
-        f"# Override with {OVERRIDE}=<python executable or environment folder> "
-        f"(and {LIB_OVERRIDE}=<libpython.so>).",
+        "# crankfmu FMU launcher: the Python the FMU needs, and where the build found it.",
+        f"# Search: the host's interpreter, {OVERRIDE}=<python executable or environment "
+        f"folder>, the builder's python below, python<version>/python3/python on PATH "
+        f"({LIB_OVERRIDE}=<libpython.so> overrides the library).",
         f"model = {model_identifier}",
-        f"python = {sys.executable}",
-        f"libpython = {libpython_path()}",
-        f"python_version = {version}",
-        f"requires = {' '.join(REQUIRES)}",
     ]
+    if not _PORTABLE[0]:
+        lines.append(f"python = {sys.executable}")
+    lines += [f"python_version = {python_version()}", f"requires = {' '.join(REQUIRES)}"]
     return ("\n".join(lines) + "\n").encode()
 
 
 def package_binary(entries: dict[str, bytes], model_identifier: str,
-                   launcher: bytes | None) -> None:
-    """Put the launcher in front of pythonfmu's linux64 binary in an FMU's `entries`
+                   launcher: bytes | None, fmi_version: int = 2) -> None:
+    """Put the launcher in front of the library's own binary for Linux in an FMU's `entries`
     (zip name -> bytes), in place; nothing changes when `launcher` is None."""
-    binary = f"binaries/linux64/{model_identifier}.so"
+    folder = f"binaries/{PLATFORM_DIR[fmi_version]}"
+    binary = f"{folder}/{model_identifier}.so"
     if launcher is None or binary not in entries:
         return
-    entries[f"binaries/linux64/{model_identifier}_pythonfmu.so"] = entries[binary]
+    entries[f"{folder}/{model_identifier}_{REAL_SUFFIX[fmi_version]}.so"] = entries[binary]
     entries[binary] = launcher
     entries[f"resources/{CONFIG_NAME}"] = launcher_config(model_identifier)
 
 
-def hosting_html(launcher: bool) -> str:
+def host_requirements() -> str:
+    """One sentence: what a host machine needs to run the FMUs (the model card, the
+    modelDescription's annotation)."""
+    return (f"Python {python_version()} with {' and '.join(REQUIRES)} (shared library "
+            f"libpython{python_version()}.so); Linux x86_64 (win64: pythonfmu's binary, in a "
+            f"host that runs that Python)")
+
+
+SEARCH_TEXT = (
+    f"the host process's own interpreter if it runs Python (fmpy, libcosimpy, ecospy); else "
+    f"{OVERRIDE} when set (a python executable, or an environment or installation folder); else "
+    f"the builder's python recorded in resources/{CONFIG_NAME} if it is still there (a portable "
+    f"build records none); else, directory by directory on PATH, python<version>, python3, "
+    f"python. A candidate is used when it is that Python version, has a shared libpython and "
+    f"imports the packages; each is asked by running it once. {LIB_OVERRIDE} names libpython "
+    f"when the candidate's own is not the one to load.")
+
+
+def hosting_html(launcher: bool, fmi_version: int = 2) -> str:
     """The model card's section "Using the FMUs in other tools"."""
-    version = f"{sys.version_info[0]}.{sys.version_info[1]}"
-    env = html.escape(sys.executable)
+    version = python_version()
+    api = "fmi2Instantiate" if fmi_version == 2 else \
+        "fmi3InstantiateCoSimulation/fmi3InstantiateModelExchange"
+    error = "fmi2Error" if fmi_version == 2 else "fmi3Error"
     req = ", ".join(REQUIRES)
     if launcher:
         how = (
-            f"<p>The FMU's linux64 binary is crankfmu's launcher: it runs in any FMI 2.0 host, "
-            f"also one that does not run Python. The host machine needs a Python {version} "
-            f"(its shared library libpython{version}.so) and an environment with {req}. The "
-            f"launcher uses the interpreter of the host process when there is one (fmpy, "
-            f"libcosimpy, ecospy); otherwise it loads libpython and starts Python in the "
-            f"environment recorded at build time: <code>{env}</code> (see "
-            f"<code>resources/{CONFIG_NAME}</code>). To use another environment, set "
-            f"<code>{OVERRIDE}</code> to its python executable or its folder (a venv or an "
-            f"installation prefix); <code>{LIB_OVERRIDE}</code> names libpython when it is not "
-            f"found beside that python. When Python or a package is missing, fmi2Instantiate "
-            f"returns NULL and the log says what is missing and where it looked.</p>"
-            f"<p>An impossible parameter ends fmi2ExitInitializationMode with fmi2Error and the "
-            f"reason in the log; the instance can then be freed or reset. Messages of status "
-            f"error and fatal are always logged, the others when logging is on.</p>"
-            f"<p>Example: <code>env -i PATH=/usr/bin:/bin ecos simulate --path "
-            f"DcServoMotor.fmu --stepSize 0.001</code> (the ecos binary is in the ecospy "
-            f"wheel, <code>ecospy/binaries/ecos</code>; it needs Debian's libtbb12).</p>")
+            f"<p>The FMU's Linux binary is crankfmu's launcher: it runs in any FMI "
+            f"{fmi_version}.0 host, also one that does not run Python. <b>The host machine "
+            f"needs</b> {html.escape(host_requirements())}.</p>"
+            f"<p>Which Python the FMU uses (the search): {html.escape(SEARCH_TEXT)} When no "
+            f"suitable Python is found, {api} returns NULL and the log lists every candidate "
+            f"it tried and why it was not used.</p>"
+            f"<p>An impossible parameter ends the exit from initialization mode with {error} "
+            f"and the reason in the log; the instance can then be freed or reset. Messages of "
+            f"status error and fatal are always logged, the others when logging is on.</p>"
+            f"<p>Example: <code>env -i PATH=/usr/bin:/bin CRANKFMU_PYTHON=/path/to/venv ecos "
+            f"simulate --path DcServoMotor.fmu --stepSize 0.001</code> (the ecos binary is in "
+            f"the ecospy wheel, <code>ecospy/binaries/ecos</code>; it needs Debian's "
+            f"libtbb12).</p>")
     else:
         how = (
             f"<p><b>This FMU was built without a C compiler and carries pythonfmu's binary "

@@ -4,13 +4,12 @@
  * Python C API undefined and expects the host to provide a running, configured interpreter. This
  * launcher makes the FMU run in any FMI host:
  *   1. Python: if the process already has an initialized interpreter (fmpy, libcosimpy, ecospy, a
- *      C host that owns one), it is used as it is. Otherwise the launcher loads libpython with
- *      RTLD_GLOBAL and starts the interpreter with the program name set to the python executable
- *      of the environment recorded at build time (resources/crankfmu_launcher.txt), so that
- *      environment's pyvenv.cfg / prefix gives its site-packages (numpy, scipy). The variable
- *      CRANKFMU_PYTHON (a python executable, or an environment / installation folder) overrides
- *      the environment, CRANKFMU_LIBPYTHON the library. The interpreter started here is never
- *      finalized (a host may still run FMU code in its own exit handlers).
+ *      C host that owns one), it is used as it is. Otherwise the launcher searches a suitable
+ *      Python (CRANKFMU_PYTHON, the builder's environment, PATH: python_host.c), loads its
+ *      libpython with RTLD_GLOBAL and starts the interpreter with the program name set to that
+ *      python, so its environment's pyvenv.cfg / prefix gives its site-packages (numpy, scipy).
+ *      The interpreter started here is never finalized (a host may still run FMU code in its
+ *      own exit handlers).
  *   2. Pre-flight: before the first instance, the packages the runtime needs (numpy, scipy) are
  *      imported; if one is missing, fmi2Instantiate returns NULL and logs what is missing, in
  *      which Python, and how to point the FMU at another environment.
@@ -36,22 +35,11 @@
  *      into pythonfmu's code for as long as the interpreter lives.
  *
  * Built by crankfmu/fmu/build.py with the system C compiler: cc -O2 -shared -fPIC launcher.c
- * -ldl -lpthread. No Python headers are needed: the few C API functions used are declared here
- * and looked up with dlsym.
+ * -ldl -lpthread (python_host.c, the part shared with the FMI 3.0 launcher launcher3.c, is
+ * included). No Python headers are needed: the few C API functions used are declared in
+ * python_host.c and looked up with dlsym.
  */
-#define _GNU_SOURCE
-#include <dlfcn.h>
-#include <limits.h>
-#include <pthread.h>
-#include <stdarg.h>
-#include <stdio.h>
-#include <stdlib.h>
-#include <string.h>
-#include <sys/stat.h>
-#include <unistd.h>
-#include <wchar.h>
-
-#define EXPORT __attribute__((visibility("default")))
+#include "python_host.c"
 
 /* ---- FMI 2.0 types (fmi2TypesPlatform.h, fmi2FunctionTypes.h) ------------------------------ */
 typedef void *fmi2Component;
@@ -78,45 +66,10 @@ typedef struct {
     fmi2ComponentEnvironment componentEnvironment;
 } fmi2CallbackFunctions;
 
-/* ---- what the build records (resources/crankfmu_launcher.txt) ----------------------------- */
-#define TEXT 4096
-typedef struct {
-    char model[256];        /* modelIdentifier: the pythonfmu binary is <model>_pythonfmu.so */
-    char python[TEXT];      /* the environment's python executable */
-    char libpython[TEXT];   /* its libpython (sysconfig LIBDIR/LDLIBRARY) */
-    char version[32];       /* e.g. 3.11 */
-    char requires[TEXT];    /* packages imported before the first instance, space separated */
-} Config;
-
-/* ---- Python C API, looked up at run time ---------------------------------------------------- */
-typedef struct {
-    int (*IsInitialized)(void);
-    void (*InitializeEx)(int);
-    void (*SetProgramName)(const wchar_t *);
-    wchar_t *(*DecodeLocale)(const char *, size_t *);
-    void *(*SaveThread)(void);
-    int (*GILEnsure)(void);
-    void (*GILRelease)(int);
-    void *(*DictNew)(void);
-    void *(*RunString)(const char *, int, void *, void *, void *);
-    void *(*DictGetItemString)(void *, const char *);
-    const char *(*AsUTF8)(void *);
-    void (*DecRef)(void *);
-    void (*ErrPrint)(void);
-} PyApi;
-#define PY_FILE_INPUT 257
-
 typedef fmi2Component (*InstantiateFn)(fmi2String, fmi2Type, fmi2String, fmi2String,
                                        const fmi2CallbackFunctions *, fmi2Boolean, fmi2Boolean);
 
-/* The pythonfmu binary of this FMU: one per loaded copy of the launcher. */
-static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
-static void *real;                 /* dlopen handle, NULL until the first fmi2Instantiate */
-static void (*real_finalize)(void);
-static PyApi py;
-static int py_ready;
-static int py_started_here;        /* this launcher started the interpreter */
-
+/* pythonfmu's fmi2 functions in its binary (python_host.c's `real`), bound once. */
 #define REAL(name) static void *real_##name;
 #define FMI2_FUNCTIONS(X)                                                                        \
     X(fmi2Instantiate) X(fmi2FreeInstance) X(fmi2SetDebugLogging) X(fmi2SetupExperiment)          \
@@ -134,9 +87,8 @@ typedef struct {
     fmi2Component c;               /* pythonfmu's component */
     fmi2CallbackFunctions host;    /* the host's callbacks */
     fmi2CallbackFunctions mine;    /* given to pythonfmu: our logger, environment = this record */
-    int logging_on, failed;
-    size_t n_categories;
-    char **categories;
+    LogFilter log;                 /* what reaches the host's logger */
+    int failed;
     char *name, *guid, *resources;
     fmi2Type type;
     fmi2Boolean visible;
@@ -170,14 +122,7 @@ static void relay_logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Stat
     /* pythonfmu logs every Python exception as fmi2Fatal; the launcher returns fmi2Error for
      * it (see outcome()), and the message says the same */
     if (status == fmi2Fatal) status = fmi2Error;
-    int wanted = status >= fmi2Error;
-    if (!wanted && inst->logging_on) {
-        wanted = inst->n_categories == 0;
-        for (size_t i = 0; !wanted && i < inst->n_categories; i++)
-            wanted = (category && !strcmp(category, inst->categories[i])) ||
-                     !strcmp(inst->categories[i], "logAll");
-    }
-    if (!wanted) return;
+    if (!log_wanted(&inst->log, status >= fmi2Error, category)) return;
     if (inst->host.logger)
         inst->host.logger(inst->host.componentEnvironment, name, status, category, "%s",
                           message);
@@ -185,286 +130,20 @@ static void relay_logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Stat
         fprintf(stderr, "[%s] %s\n", name ? name : "?", message);
 }
 
-/* ---- configuration -------------------------------------------------------------------------- */
-static void trim(char *s) {
-    size_t n = strlen(s);
-    while (n && (s[n - 1] == '\n' || s[n - 1] == '\r' || s[n - 1] == ' ')) s[--n] = 0;
-}
-
-static int read_config(const char *resources, Config *cfg, char *error, size_t size) {
-    char path[TEXT + 64], line[2 * TEXT];
-    snprintf(path, sizeof path, "%s/crankfmu_launcher.txt", resources);
-    FILE *in = fopen(path, "r");
-    if (!in) {
-        snprintf(error, size, "cannot read %s (the FMU is incomplete)", path);
-        return 0;
-    }
-    memset(cfg, 0, sizeof *cfg);
-    while (fgets(line, sizeof line, in)) {
-        trim(line);
-        char *eq = strstr(line, " = ");
-        if (line[0] == '#' || !eq) continue;
-        *eq = 0;
-        const char *value = eq + 3;
-        if (!strcmp(line, "model")) snprintf(cfg->model, sizeof cfg->model, "%s", value);
-        else if (!strcmp(line, "python")) snprintf(cfg->python, sizeof cfg->python, "%s", value);
-        else if (!strcmp(line, "libpython"))
-            snprintf(cfg->libpython, sizeof cfg->libpython, "%s", value);
-        else if (!strcmp(line, "python_version"))
-            snprintf(cfg->version, sizeof cfg->version, "%s", value);
-        else if (!strcmp(line, "requires"))
-            snprintf(cfg->requires, sizeof cfg->requires, "%s", value);
-    }
-    fclose(in);
-    if (!cfg->model[0] || !cfg->version[0]) {
-        snprintf(error, size, "%s lacks 'model' or 'python_version'", path);
-        return 0;
-    }
-    return 1;
-}
-
-static int is_file(const char *p) { struct stat st; return !stat(p, &st) && S_ISREG(st.st_mode); }
-static int is_dir(const char *p) { struct stat st; return !stat(p, &st) && S_ISDIR(st.st_mode); }
-
-/* The python executable of CRANKFMU_PYTHON: the file itself, or <folder>/bin/python<version>,
- * <folder>/bin/python3 for an environment or installation folder. */
-static int override_python(const Config *cfg, char *out, size_t size) {
-    const char *given = getenv("CRANKFMU_PYTHON");
-    if (!given || !given[0]) return 0;
-    if (is_dir(given)) {
-        const char *names[] = {"python", "python3", NULL};
-        snprintf(out, size, "%s/bin/python%s", given, cfg->version);
-        for (int i = 0; names[i] && !is_file(out); i++)
-            snprintf(out, size, "%s/bin/%s", given, names[i]);
-    } else snprintf(out, size, "%s", given);
-    return 1;
-}
-
-/* Candidates for libpython of a python executable: from its venv's pyvenv.cfg "home", else
- * beside its own prefix (<exe dir>/../lib). */
-static void libpython_beside(const char *exe, const char *version, char *out, size_t size) {
-    char dir[TEXT], cfgpath[TEXT + 32], line[TEXT], home[TEXT] = "";
-    out[0] = 0;
-    snprintf(dir, sizeof dir, "%s", exe);
-    char *slash = strrchr(dir, '/');
-    if (!slash) return;
-    *slash = 0;
-    for (int up = 0; up < 2 && !home[0]; up++) {
-        snprintf(cfgpath, sizeof cfgpath, up ? "%s/../pyvenv.cfg" : "%s/pyvenv.cfg", dir);
-        FILE *in = fopen(cfgpath, "r");
-        if (!in) continue;
-        while (fgets(line, sizeof line, in)) {
-            trim(line);
-            if (!strncmp(line, "home", 4)) {
-                char *v = strchr(line, '=');
-                if (v) { v++; while (*v == ' ') v++; snprintf(home, sizeof home, "%s", v); }
-            }
-        }
-        fclose(in);
-    }
-    const char *bin = home[0] ? home : dir;
-    const char *forms[] = {"%s/../lib/libpython%s.so.1.0", "%s/../lib/libpython%s.so", NULL};
-    for (int i = 0; forms[i]; i++) {
-        snprintf(out, size, forms[i], bin, version);
-        if (is_file(out)) return;
-    }
-    out[0] = 0;
-}
-
-#define PY_SYMBOL(field, name)                                                                   \
-    if (!(*(void **)&py.field = dlsym(lib, name))) {                                             \
-        snprintf(error, size, "%s has no %s: not a Python %s library", where, name, version);    \
-        return 0;                                                                                \
-    }
-
-static int bind_python(void *lib, const char *where, const char *version, char *error,
-                       size_t size) {
-    PY_SYMBOL(IsInitialized, "Py_IsInitialized")
-    PY_SYMBOL(InitializeEx, "Py_InitializeEx")
-    PY_SYMBOL(SetProgramName, "Py_SetProgramName")
-    PY_SYMBOL(DecodeLocale, "Py_DecodeLocale")
-    PY_SYMBOL(SaveThread, "PyEval_SaveThread")
-    PY_SYMBOL(GILEnsure, "PyGILState_Ensure")
-    PY_SYMBOL(GILRelease, "PyGILState_Release")
-    PY_SYMBOL(DictNew, "PyDict_New")
-    PY_SYMBOL(RunString, "PyRun_StringFlags")
-    PY_SYMBOL(DictGetItemString, "PyDict_GetItemString")
-    PY_SYMBOL(AsUTF8, "PyUnicode_AsUTF8")
-    PY_SYMBOL(DecRef, "Py_DecRef")
-    PY_SYMBOL(ErrPrint, "PyErr_Print")
-    return 1;
-}
-
-#define HOW_TO_POINT                                                                             \
-    "Set CRANKFMU_PYTHON to the python executable (or the folder) of a Python %s environment "  \
-    "that has %s installed (and CRANKFMU_LIBPYTHON to its libpython%s.so if that is not found "  \
-    "beside it); see the FMU's documentation/index.html, \"Using the FMUs in other tools\"."
-
-/* Make sure an initialized interpreter runs in this process; start one if needed. */
-static int ensure_python(const Config *cfg, char *error, size_t size) {
-    if (py_ready) return 1;
-    char python[TEXT], libpython[TEXT] = "";
-    int overridden = override_python(cfg, python, sizeof python);
-    if (!overridden) snprintf(python, sizeof python, "%s", cfg->python);
-    void *lib = dlopen(NULL, RTLD_NOW);  /* the process: a Python host or a host linking it */
-    if (lib && dlsym(lib, "Py_IsInitialized")) {
-        if (!bind_python(lib, "this process", cfg->version, error, size)) return 0;
-    } else {
-        const char *lp = getenv("CRANKFMU_LIBPYTHON");
-        if (lp && lp[0]) snprintf(libpython, sizeof libpython, "%s", lp);
-        else if (overridden) libpython_beside(python, cfg->version, libpython, sizeof libpython);
-        else snprintf(libpython, sizeof libpython, "%s", cfg->libpython);
-        char soname[64], tried[3 * TEXT];
-        snprintf(soname, sizeof soname, "libpython%s.so.1.0", cfg->version);
-        lib = libpython[0] ? dlopen(libpython, RTLD_NOW | RTLD_GLOBAL) : NULL;
-        snprintf(tried, sizeof tried, "%s: %s", libpython[0] ? libpython : "(none found)",
-                 libpython[0] && !lib ? dlerror() : "not found");
-        if (!lib) lib = dlopen(soname, RTLD_NOW | RTLD_GLOBAL); /* the loader's search path */
-        if (!lib) {
-            snprintf(error, size, "Python %s is not available: libpython not loaded (%s; %s: "
-                     "%s). " HOW_TO_POINT, cfg->version, tried, soname, dlerror(), cfg->version,
-                     cfg->requires, cfg->version);
-            return 0;
-        }
-        if (!bind_python(lib, libpython[0] ? libpython : soname, cfg->version, error, size))
-            return 0;
-    }
-    if (!py.IsInitialized()) {
-        if (!is_file(python)) {
-            snprintf(error, size, "%s %s: no python executable there. " HOW_TO_POINT,
-                     overridden ? "CRANKFMU_PYTHON gives" : "the environment recorded at build "
-                     "time is gone:", python, cfg->version, cfg->requires, cfg->version);
-            return 0;
-        }
-        /* The program name makes Python find the environment: a venv's pyvenv.cfg beside it
-         * adds the venv's site-packages; an installation's prefix is found from it. */
-        wchar_t *program = py.DecodeLocale(python, NULL);
-        if (program) py.SetProgramName(program); /* kept: Python uses it until exit */
-        py.InitializeEx(0);                       /* 0: no signal handlers in the host */
-        py.SaveThread();                          /* release the GIL; pythonfmu takes it */
-        py_started_here = 1;
-    }
-    py_ready = 1;
-    return 1;
-}
-
-/* Import the packages the runtime needs; on failure write what is missing into `error`. */
-static int preflight(const Config *cfg, char *error, size_t size) {
-    static const char code[] =
-        "import sys\n"
-        "missing = []\n"
-        "for name in requires.split():\n"
-        "    try:\n"
-        "        __import__(name)\n"
-        "    except Exception as err:\n"
-        "        missing.append(f'{name} ({type(err).__name__}: {err})')\n"
-        "message = ''\n"
-        "if missing:\n"
-        "    message = ('Python package(s) missing: ' + '; '.join(missing) + '. The FMU runs in '\n"
-        "               f'the Python at {sys.executable} (prefix {sys.prefix}, Python '\n"
-        "               f'{sys.version.split()[0]}), which cannot import them.')\n";
-    int ok = 1;
-    int gil = py.GILEnsure();
-    void *globals = py.DictNew();
-    char script[sizeof code + TEXT + 64];
-    snprintf(script, sizeof script, "requires = '%s'\n%s", cfg->requires, code);
-    void *result = globals ? py.RunString(script, PY_FILE_INPUT, globals, globals, NULL) : NULL;
-    if (!result) {
-        py.ErrPrint();
-        snprintf(error, size, "the pre-flight check could not run in Python (traceback on "
-                 "stderr)");
-        ok = 0;
-    } else {
-        py.DecRef(result);
-        void *message = py.DictGetItemString(globals, "message"); /* borrowed */
-        const char *text = message ? py.AsUTF8(message) : NULL;
-        if (text && text[0]) {
-            if (py_started_here)
-                snprintf(error, size, "%s " HOW_TO_POINT, text, cfg->version, cfg->requires,
-                         cfg->version);
-            else
-                snprintf(error, size, "%s This host runs Python itself, and the FMU uses that "
-                         "interpreter: install %s into it, or run the host from an environment "
-                         "that has them (CRANKFMU_PYTHON applies to hosts that do not run "
-                         "Python).", text, cfg->requires);
-            ok = 0;
-        }
-    }
-    if (globals) py.DecRef(globals);
-    py.GILRelease(gil);
-    return ok;
-}
-
-static void release_at_exit(void) {
-    if (real_finalize) real_finalize();
-}
-
-/* This launcher's own file, for the path of the pythonfmu binary beside it. */
-static int own_dir(char *out, size_t size) {
-    Dl_info info;
-    if (!dladdr((void *)&own_dir, &info) || !info.dli_fname) return 0;
-    snprintf(out, size, "%s", info.dli_fname);
-    char *slash = strrchr(out, '/');
-    if (!slash) return 0;
-    *slash = 0;
-    return 1;
-}
-
 #define BIND(name)                                                                               \
     if (!(real_##name = dlsym(real, #name))) {                                                   \
-        snprintf(error, size, "%s has no %s", path, #name);                                      \
+        snprintf(error, size, "pythonfmu's binary has no %s", #name);                            \
         return 0;                                                                                \
     }
 
-static int load_real(const Config *cfg, const char *resources, char *error, size_t size) {
-    if (real) return 1;
-    char dir[TEXT], path[2 * TEXT];
-    if (own_dir(dir, sizeof dir)) snprintf(path, sizeof path, "%s/%s_pythonfmu.so", dir,
-                                           cfg->model);
-    if (!own_dir(dir, sizeof dir) || !is_file(path))
-        snprintf(path, sizeof path, "%s/../binaries/linux64/%s_pythonfmu.so", resources,
-                 cfg->model);
-    real = dlopen(path, RTLD_NOW | RTLD_LOCAL | RTLD_NODELETE);
-    if (!real) {
-        snprintf(error, size, "cannot load pythonfmu's binary: %s", dlerror());
-        return 0;
-    }
+static int bind_fmi2(char *error, size_t size) {
+    if (real_fmi2Instantiate) return 1;
     FMI2_FUNCTIONS(BIND)
-    *(void **)&real_finalize = dlsym(real, "finalizePythonInterpreter");
-    /* Registered after the binary's static constructors: runs before its static destructors. */
-    atexit(release_at_exit);
-    /* Pin this launcher too: the exit handler above lives in it. */
-    Dl_info info;
-    if (dladdr((void *)&load_real, &info) && info.dli_fname)
-        dlopen(info.dli_fname, RTLD_NOW | RTLD_NOLOAD | RTLD_NODELETE);
     return 1;
-}
-
-/* "file:///a%20b/resources" -> "/a b/resources" */
-static void uri_to_path(const char *uri, char *out, size_t size) {
-    const char *p = uri ? uri : "";
-    if (!strncmp(p, "file://", 7)) p += 7;
-    if (!strncmp(p, "localhost/", 10)) p += 9;
-    size_t n = 0;
-    for (; *p && n + 1 < size; p++) {
-        unsigned int byte;
-        if (p[0] == '%' && sscanf(p + 1, "%2x", &byte) == 1) { out[n++] = (char)byte; p += 2; }
-        else out[n++] = *p;
-    }
-    out[n] = 0;
-    while (n > 1 && out[n - 1] == '/') out[--n] = 0;
-}
-
-static char *copy(const char *s) {
-    if (!s) return NULL;
-    char *c = malloc(strlen(s) + 1);
-    if (c) strcpy(c, s);
-    return c;
 }
 
 static void free_record(Instance *inst) {
-    for (size_t i = 0; i < inst->n_categories; i++) free(inst->categories[i]);
-    free(inst->categories);
+    clear_log_filter(&inst->log);
     free(inst->name); free(inst->guid); free(inst->resources);
     free(inst);
 }
@@ -486,12 +165,12 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String 
         return NULL;
     }
     uri_to_path(resources, dir, sizeof dir);
-    pthread_mutex_lock(&lock);
-    int ok = read_config(dir, &cfg, error, sizeof error) &&
-             ensure_python(&cfg, error, sizeof error) &&
-             preflight(&cfg, error, sizeof error) &&
-             load_real(&cfg, dir, error, sizeof error);
-    pthread_mutex_unlock(&lock);
+    int ok = prepare(dir, "pythonfmu", "linux64", &cfg, error, sizeof error);
+    if (ok) {
+        pthread_mutex_lock(&lock);
+        ok = bind_fmi2(error, sizeof error);
+        pthread_mutex_unlock(&lock);
+    }
     if (!ok) {
         host_log(cb, name, fmi2Error, "fmi2Instantiate: %s", error);
         return NULL;
@@ -502,7 +181,7 @@ EXPORT fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String 
     inst->mine = *cb;
     inst->mine.logger = relay_logger;
     inst->mine.componentEnvironment = inst;
-    inst->logging_on = logging_on;
+    inst->log.on = logging_on;
     inst->name = copy(name);
     inst->guid = copy(guid);
     inst->resources = copy(resources);
@@ -594,17 +273,7 @@ EXPORT fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n,
                                       const fmi2String categories[]) {
     Instance *inst = (Instance *)c;
     if (!inst) return fmi2Error;
-    for (size_t i = 0; i < inst->n_categories; i++) free(inst->categories[i]);
-    free(inst->categories);
-    inst->categories = NULL;
-    inst->n_categories = 0;
-    inst->logging_on = on;
-    if (on && n) {
-        inst->categories = calloc(n, sizeof *inst->categories);
-        if (!inst->categories) return fmi2Error;
-        for (size_t i = 0; i < n; i++) inst->categories[i] = copy(categories[i]);
-        inst->n_categories = n;
-    }
+    if (!set_log_filter(&inst->log, on, n, categories)) return fmi2Error;
     return fmi2OK; /* pythonfmu keeps logging everything; relay_logger filters */
 }
 

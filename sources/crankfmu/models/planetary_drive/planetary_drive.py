@@ -175,6 +175,9 @@ class PlanetaryClutchDrive(PhysicsModel):
     # does the same at every restart, integrating derivatives()
     advance_follows_contract = True
 
+    # one member locked: 2 break-free + 2 zero speed + command + 2 power-law kinks
+    event_slots = 7
+
     parameters = (
         Variable("r_a", "m", "Pitch radius of the sun gear a", 0.10, min=0.0),
         Variable("r_b", "m", "Pitch radius of the ring gear b (p = r_b/r_a)", 0.25, min=0.0),

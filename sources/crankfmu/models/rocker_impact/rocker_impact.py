@@ -26,6 +26,8 @@ class RockerImpact(PhysicsModel):
     # monitor_functions handed to observe(), and observe() at the step end
     advance_follows_contract = True
 
+    event_slots = 3  # the contact switch; in contact the P and T extrema (monitors)
+
     parameters = (
         Variable("J", "kg.m2", "Rocker moment of inertia about the pivot axis", 0.734, min=0.0),
         Variable("m", "kg", "Rocker mass", 35.1, min=0.0),

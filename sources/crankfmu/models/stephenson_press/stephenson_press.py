@@ -21,6 +21,8 @@ class StephensonPress(PhysicsModel):
     seed = "stephenson_press_servo_drive.txt, eq. (1)-(3), (21)-(22)"
     integrator = "DOP853"
 
+    event_slots = 2  # the forging window's next edge ahead and last edge behind
+
     parameters = (
         Variable("r", "m", "Crank radius", 0.05, min=0.0),
         Variable("l", "m", "Length of the parallel rods 3 and 4 (must exceed r)", 0.25, min=0.0),

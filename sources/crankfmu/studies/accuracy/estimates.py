@@ -14,10 +14,12 @@ from dataclasses import replace
 from pathlib import Path
 
 from ...cosim.estimate import companion_knobs, order_rule, richardson
-from .sweep import Outcome, Setting, is_variable_step
+from .sweep import Outcome, Setting, is_monolithic, is_variable_step
 
 
 def companion_settings(setting: Setting) -> list[Setting]:
+    if is_monolithic(setting.algorithm):  # no coupling error: nothing to estimate
+        return []
     knob, _, values = companion_knobs(is_variable_step(setting.algorithm), setting.step,
                                       setting.tolerance)
     return [replace(setting, **{knob: v}) for v in values]
@@ -50,6 +52,10 @@ def add_estimates(outcomes: list[Outcome], metric, runs_dir: Path) -> None:
         if o.status != "completed" and not o.unstable and not o.events_differ:
             continue
         s = o.setting
+        if is_monolithic(s.algorithm):
+            o.extra["estimated_error"] = None
+            o.extra["estimate_reason"] = "no coupling error (the FMUs as one ODE)"
+            continue
         series = [_series(runs_dir, x) for x in [s] + companion_settings(s)]
         if any(x is None for x in series):
             o.extra["estimated_error"] = None

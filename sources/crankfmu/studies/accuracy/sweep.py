@@ -101,10 +101,23 @@ def is_variable_step(algorithm: str) -> bool:
     return algorithm == "adaptive" or bool(getattr(cls, "variable_step", False))
 
 
+def is_monolithic(algorithm: str) -> bool:
+    """A master that integrates the FMUs' Model Exchange interfaces as one ODE (model-exchange):
+    it has no communication step or extrapolation to sweep, so the sweep runs it once, at the
+    scene's step (its record grid), as the row the co-simulation masters are set against."""
+    from ...fmu.instance3 import CO_SIMULATION
+    from ...system.wiring import master_interface
+    return master_interface(algorithm) != CO_SIMULATION
+
+
 def settings_for(scene, algorithms, extrapolations, steps, fmu_tolerances,
                  tolerances) -> list[Setting]:
     out = []
     for alg in algorithms:
+        if is_monolithic(alg):
+            out.append(Setting(alg, 0, scene.master.step, fmu_tolerances[0],
+                               scene.master.tolerance))
+            continue
         for ex in extrapolations:
             for ft in fmu_tolerances:
                 if is_variable_step(alg):
@@ -342,6 +355,8 @@ def orders(outcomes: list[Outcome], floor_factor: float = FLOOR_FACTOR) -> dict:
         groups.setdefault((s.algorithm, s.extrapolation, s.fmu_tolerance), []).append(o)
     result = {}
     for key, group in groups.items():
+        if is_monolithic(key[0]):  # one run: no order to observe
+            continue
         ok = [o for o in group if o.ok]
         order, used = observed_order([o.knob_value for o in ok], [o.error for o in ok],
                                      floor_factor * key[2])
@@ -352,11 +367,18 @@ def orders(outcomes: list[Outcome], floor_factor: float = FLOOR_FACTOR) -> dict:
 def cheapest(outcomes: list[Outcome], target: float) -> Outcome | None:
     """The run with the least wall time among those whose error meets the target (ties: fewer
     doStep calls)."""
-    meeting = [o for o in outcomes if o.ok and o.error <= target]
+    meeting = _co_simulations_meeting(outcomes, target)
     return min(meeting, key=lambda o: (o.wall_seconds, o.do_steps)) if meeting else None
 
 
 def fewest_steps(outcomes: list[Outcome], target: float) -> Outcome | None:
     """The run with the fewest doStep calls among those meeting the target (timing-free)."""
-    meeting = [o for o in outcomes if o.ok and o.error <= target]
+    meeting = _co_simulations_meeting(outcomes, target)
     return min(meeting, key=lambda o: (o.do_steps, o.wall_seconds)) if meeting else None
+
+
+def _co_simulations_meeting(outcomes: list[Outcome], target: float) -> list[Outcome]:
+    """The co-simulation runs meeting the target (the monolithic row is what they are set
+    against, not a setting to choose)."""
+    return [o for o in outcomes if o.ok and o.error <= target
+            and not is_monolithic(o.setting.algorithm)]

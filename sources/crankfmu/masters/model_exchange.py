@@ -1,0 +1,367 @@
+"""Model Exchange: the Model Exchange FMUs of all components integrated as one ODE by scipy.
+
+Not a co-simulation: the state vector is every FMU's continuous states; at every right-hand-side
+evaluation each FMU gets the time and its states (fmi3SetTime, fmi3SetContinuousStates), the
+couplings are resolved through FMI (outputs read and written to the connected inputs in the
+order their direct feedthrough needs: `evaluation_plan`) and the derivatives read. So the coupling
+is exact, as in the monolithic reference (reference/composed.py), but through the FMUs: it is the
+solution a co-simulation approaches as its step goes to zero, computed with the FMUs themselves.
+
+scipy's solve_ivp integrates over each communication step (the runner's grid; a step that
+crosses an edge of a step-table input ends there) with every FMU's event indicators as terminal
+events. At a zero crossing the master takes the first point past it on the solver's dense output
+(the FMU sees the indicator's new sign, as FMI asks), gives every FMU that point, and runs the
+event iteration: fmi3EnterEventMode, fmi3UpdateDiscreteStates (twice, so that a mode change that
+moves outputs reaches the inputs it feeds), the states read back, fmi3EnterContinuousTimeMode;
+then it integrates on. A step table's edge is an input event (the same iteration at the step's
+start); within a step, step tables are held at their value at the segment's start, linear tables
+follow time. An indicator that is exactly zero where a segment starts (it was zero when its
+mode began) is not a crossing there: scipy would count it as one and stop at once.
+
+The catalog's FMI 3.0 FMUs provide Model Exchange (fmu/build_fmi3.py; the runner loads each
+component's FMU for its effects); FMI 2.0 FMUs from pythonfmu have none, and are refused.
+Method: DOP853, or Radau when the composed Jacobian at the start has a rate above STIFF_RATE
+(`integration_method`, as the monolithic reference chooses); atol = rtol x each state's nominal.
+"""
+from __future__ import annotations
+
+import ctypes
+import math
+
+import numpy as np
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi3 import fmi3Boolean, fmi3Float64
+
+from ..fmu.instance3 import MODEL_EXCHANGE, feedthrough
+from .base import Master
+from .history import History
+from .inputs import edge_reading_time
+from .options import Option
+
+STIFF_RATE = 1e4  # 1/s: fastest eigenvalue above which the ODE is solved by Radau
+FMI_WARNING = 1   # an FMI status above fmi3Warning failed
+RTOL = Option("rtol", float, "1", 1e-8, "relative tolerance of scipy's solve_ivp over all the "
+              "FMUs' states (atol = rtol x each state's nominal)", positive=True, maximum=0.1)
+PAST_CROSSING_TRIES = 200  # doublings of the distance from a located root to its far side
+
+
+def integration_method(rhs, t: float, x: np.ndarray) -> str:
+    """Radau when the Jacobian of rhs(t, x) (finite differences) has a rate above STIFF_RATE
+    (time constants below 0.1 ms: an explicit method would need steps that small), else DOP853,
+    several times faster at tight tolerances on the non-stiff crank scenes."""
+    x = np.asarray(x, dtype=float)
+    if x.size == 0:
+        return "DOP853"
+    f0 = np.asarray(rhs(t, x), dtype=float)
+    jac = np.empty((x.size, x.size))
+    for j in range(x.size):
+        dx = 1e-7 * max(abs(x[j]), 1.0)
+        xp = x.copy()
+        xp[j] += dx
+        jac[:, j] = (np.asarray(rhs(t, xp), dtype=float) - f0) / dx
+    rate = float(np.max(np.abs(np.linalg.eigvals(jac)))) if np.all(np.isfinite(jac)) else 0.0
+    return "Radau" if rate > STIFF_RATE else "DOP853"
+
+
+def _check(status: int, function: str) -> None:
+    if status > FMI_WARNING:
+        raise FMICallException(function=function, status=status)
+
+
+class MePart:
+    """One component's Model Exchange FMU: its slice of the state vector and raw FMI calls on
+    prepared ctypes buffers."""
+
+    def __init__(self, comp: str, fmu, offset: int):
+        if getattr(fmu, "interface", None) != MODEL_EXCHANGE:
+            raise ValueError(f"component {comp}: {fmu.path.name} is not loaded as a Model "
+                             f"Exchange FMU (the model-exchange master needs FMI 3.0 FMUs with "
+                             f"<ModelExchange>)")
+        md = fmu.model_description
+        self.comp, self.fmu = comp, fmu
+        self.nx, self.nz = md.numberOfContinuousStates, md.numberOfEventIndicators
+        self.states = slice(offset, offset + self.nx)
+        self.indicators = slice(0, 0)  # set by the master: this part's slice of all indicators
+        self.x = (fmi3Float64 * self.nx)()
+        self.dx = (fmi3Float64 * self.nx)()
+        self.z = (fmi3Float64 * self.nz)()
+        self.f = fmu.fmu._functions
+
+    @property
+    def c(self):
+        return self.fmu.fmu.component
+
+    def set_time_and_states(self, t: float, y: np.ndarray) -> None:
+        _check(self.f["fmi3SetTime"](self.c, t), "fmi3SetTime")
+        if self.nx:
+            np.ctypeslib.as_array(self.x)[:] = y[self.states]
+            _check(self.f["fmi3SetContinuousStates"](self.c, self.x, self.nx),
+                   "fmi3SetContinuousStates")
+
+    def derivatives(self) -> np.ndarray:
+        _check(self.f["fmi3GetContinuousStateDerivatives"](self.c, self.dx, self.nx),
+               "fmi3GetContinuousStateDerivatives")
+        return np.ctypeslib.as_array(self.dx)
+
+    def event_indicators(self) -> np.ndarray:
+        _check(self.f["fmi3GetEventIndicators"](self.c, self.z, self.nz),
+               "fmi3GetEventIndicators")
+        return np.ctypeslib.as_array(self.z)
+
+    def continuous_states(self) -> np.ndarray:
+        _check(self.f["fmi3GetContinuousStates"](self.c, self.x, self.nx),
+               "fmi3GetContinuousStates")
+        return np.ctypeslib.as_array(self.x).copy()
+
+    def nominals(self) -> np.ndarray:
+        buf = (fmi3Float64 * self.nx)()
+        _check(self.f["fmi3GetNominalsOfContinuousStates"](self.c, buf, self.nx),
+               "fmi3GetNominalsOfContinuousStates")
+        return np.ctypeslib.as_array(buf).copy()
+
+    def update_discrete_states(self) -> None:
+        """fmi3UpdateDiscreteStates until the FMU needs no further iteration."""
+        flags = [fmi3Boolean() for _ in range(5)]
+        next_time = fmi3Float64()
+        for _ in range(100):
+            _check(self.f["fmi3UpdateDiscreteStates"](self.c, *map(ctypes.byref, flags),
+                                                       ctypes.byref(next_time)),
+                   "fmi3UpdateDiscreteStates")
+            if flags[1].value:
+                raise RuntimeError(f"{self.comp} asked to terminate the simulation")
+            if not flags[0].value:
+                return
+        raise RuntimeError(f"{self.comp}: more than 100 event iterations at one time")
+
+    def mode(self, function: str) -> None:
+        _check(self.f[function](self.c), function)
+
+
+def evaluation_plan(system) -> list[str]:
+    """The components in the order their connected outputs must be read, so that every output
+    is read after the inputs it depends on directly (ModelStructure) were written from their
+    sources; a component appears as often as that needs (the servo press: press, motor)."""
+    needs = {}  # (comp, output) -> the (source comp, source output) it waits for
+    for comp, fmu in system.fmus.items():
+        deps = feedthrough(fmu)
+        sources = {l.target_var: (l.source, l.source_var) for l in system.links
+                   if l.target == comp}
+        for out in system.out_names[comp]:
+            needs[comp, out] = {sources[i] for i in deps.get(out, ()) if i in sources}
+    ready: set = set()
+    plan: list[str] = []
+    while len(ready) < len(needs):
+        progress = False
+        for comp in system.order:
+            take = [key for key in needs if key[0] == comp and key not in ready
+                    and needs[key] <= ready]
+            if take:
+                plan.append(comp)
+                ready.update(take)
+                progress = True
+        if not progress:  # check_loops refuses such scenes before a run
+            stuck = sorted(f"{c}.{o}" for c, o in needs if (c, o) not in ready)
+            raise ValueError(f"algebraic loop through {', '.join(stuck)}")
+    return plan
+
+
+class ModelExchange(Master):
+    name = "model-exchange"
+    interface = MODEL_EXCHANGE  # the runner loads every component's FMU for Model Exchange
+    options = (RTOL,)
+
+    def __init__(self, system, settings):
+        super().__init__(system, settings)
+        self.rtol = self.option("rtol")
+        self.parts, offset = [], 0
+        for comp in system.order:
+            part = MePart(comp, system.fmus[comp], offset)
+            offset += part.nx
+            self.parts.append(part)
+        offset_z = 0
+        for part in self.parts:
+            part.indicators = slice(offset_z, offset_z + part.nz)
+            offset_z += part.nz
+        self.n_states, self.n_indicators = offset, offset_z
+        self.plan = evaluation_plan(system)
+        self.varying = [(c, system.write_external[c], [s for _, s in system.external[c]])
+                        for c in system.order if system.external_varies[c]]
+        self.y = np.zeros(self.n_states)
+        self.atol = np.zeros(self.n_states)
+        self.method = "DOP853"
+        self._hold = 0.0       # s: the segment's start, where step tables are read
+        self._held = None      # the step tables' values held in the last segment
+        self._cache = (None, None, None)  # (t, y bytes, indicators)
+        self._first_step = None
+        self.counts = {"method": self.method, "rhs_evaluations": 0, "solver_steps": 0,
+                       "state_events": 0, "input_events": 0}
+        self.extra_statistics = self.counts
+
+    # -- evaluation -------------------------------------------------------------------------
+    def _external(self, t: float) -> None:
+        """Time-table inputs at t: step tables held at the segment's start, linear ones at t."""
+        for _, write, signals in self.varying:
+            write([s.value_at(self._hold if s.interpolation == "step" else t) for s in signals])
+
+    def _evaluate(self, t: float, y: np.ndarray) -> None:
+        """Every FMU at (t, its states), the couplings resolved."""
+        for part in self.parts:
+            part.set_time_and_states(t, y)
+        self._resolve(t)
+
+    def _resolve(self, t: float) -> None:
+        """The inputs at t: external ones, and the connected outputs read in plan order and
+        written to the inputs they feed."""
+        system = self.system
+        self._external(t)
+        for comp in self.plan:
+            system.write_inputs[comp](system.gather_inputs(comp))
+            system.refresh_outputs(comp)
+        for comp in system.order:
+            system.write_inputs[comp](system.gather_inputs(comp))
+
+    def rhs(self, t: float, y: np.ndarray) -> np.ndarray:
+        self.counts["rhs_evaluations"] += 1
+        self._evaluate(t, y)
+        out = np.empty(self.n_states)
+        for part in self.parts:
+            if part.nx:
+                out[part.states] = part.derivatives()
+        return out
+
+    def indicators(self, t: float, y: np.ndarray) -> np.ndarray:
+        """All FMUs' event indicators at (t, y) (scipy asks for them one at a time: computed
+        once per point)."""
+        key = y.tobytes()
+        if self._cache[0] == t and self._cache[1] == key:
+            return self._cache[2]
+        self._evaluate(t, y)
+        z = np.empty(self.n_indicators)
+        for part in self.parts:
+            if part.nz:
+                z[part.indicators] = part.event_indicators()
+        self._cache = (t, key, z)
+        return z
+
+    # -- events ------------------------------------------------------------------------------
+    def _event_iteration(self, t: float) -> None:
+        """The FMUs, at t and self.y, in event mode: discrete updates (twice: a mode change
+        that moves outputs reaches the inputs it feeds), the states read back."""
+        self._cache = (None, None, None)
+        for _ in range(2):
+            self._resolve(t)
+            for part in self.parts:
+                part.update_discrete_states()
+        for part in self.parts:
+            if part.nx:
+                self.y[part.states] = part.continuous_states()
+            part.mode("fmi3EnterContinuousTimeMode")
+        self._first_step = None
+
+    def _enter_event_mode(self) -> None:
+        for part in self.parts:
+            part.mode("fmi3EnterEventMode")
+
+    def _events(self, t0: float, y0: np.ndarray) -> list:
+        """scipy event functions, one per indicator; one that is exactly zero at (t0, y0) is
+        NaN there (no crossing at the segment's start: see the module docstring)."""
+        if not self.n_indicators:
+            return []
+        zero = self.indicators(t0, y0) == 0.0
+        events = []
+        for i in range(self.n_indicators):
+            def event(t, y, i=i):
+                if t == t0 and zero[i]:
+                    return math.nan
+                return self.indicators(t, y)[i]
+            event.terminal, event.direction = True, 0.0
+            events.append(event)
+        return events
+
+    def _past_crossing(self, sol, i: int, t_end: float):
+        """The first point after the located root of indicator i where its sign is no longer
+        the one it had before the step that crossed (the dense output of that step); None if it
+        is not reached by t_end."""
+        t_root = float(sol.t_events[i][0])
+        t_before = sol.t[-2] if len(sol.t) > 1 else sol.t[0]
+        before = np.sign(self.indicators(t_before, sol.sol(t_before))[i])
+        distance = 4.0 * math.ulp(max(abs(t_root), 1.0))  # ~1e-15 s, doubled until past
+        t = t_root
+        for _ in range(PAST_CROSSING_TRIES):
+            if t > t_end:
+                return None
+            y = sol.sol(t)
+            if np.sign(self.indicators(t, y)[i]) != before:
+                return t, y
+            t = t_root + distance
+            distance *= 2.0
+        return None
+
+    # -- the master contract -----------------------------------------------------------------
+    def initialize(self, t0: float) -> None:
+        super().initialize(t0)  # every FMU leaves initialization in event mode (FMI 3.0)
+        system = self.system
+        self._hold = t0
+        for part in self.parts:
+            if part.nx:
+                self.y[part.states] = part.continuous_states()
+                self.atol[part.states] = self.rtol * part.nominals()
+        self._event_iteration(t0)
+        self._held = self._step_table_values(t0)
+        for comp in system.order:
+            system.refresh_outputs(comp)
+        self.history = History()  # the point at t0 after the initial event iteration
+        self._remember(t0)
+        self.method = self.counts["method"] = integration_method(self.rhs, t0, self.y)
+
+    def _step_table_values(self, t: float) -> list:
+        return [s.value_at(edge_reading_time(t)) for _, _, signals in self.varying
+                for s in signals if s.interpolation == "step"]
+
+    def _step(self, t: float, h: float) -> float:
+        from scipy.integrate import solve_ivp
+
+        system, t_end = self.system, t + h
+        start_inputs = {c: np.array(system.gather_inputs(c)) for c in system.order}
+        self._hold = t
+        held = self._step_table_values(t)
+        if held != self._held:  # a step table's edge: an input event
+            self._held = held
+            self.counts["input_events"] += 1
+            self._enter_event_mode()
+            self._event_iteration(t)
+        while True:
+            events = self._events(t, self.y)
+            first = None if self._first_step is None else min(self._first_step, t_end - t)
+            sol = solve_ivp(self.rhs, (t, t_end), self.y, method=self.method, rtol=self.rtol,
+                            atol=self.atol, events=events or None, dense_output=bool(events),
+                            first_step=first)
+            if sol.status < 0:
+                raise RuntimeError(f"solve_ivp ({self.method}) failed at t = {t:.9g} s: "
+                                   f"{sol.message}")
+            self.counts["solver_steps"] += len(sol.t) - 1
+            if len(sol.t) > 1:
+                self._first_step = float(sol.t[-1] - sol.t[-2]) or None
+            if sol.status == 0:
+                self.y = sol.y[:, -1].copy()
+                break
+            i = next(k for k, te in enumerate(sol.t_events) if len(te))
+            past = self._past_crossing(sol, i, t_end)
+            if past is None:  # the far side lies beyond the step: the next step meets it
+                self.y = sol.sol(t_end)
+                break
+            t, self.y = past  # the FMUs are there: _past_crossing evaluated that point last
+            self.counts["state_events"] += 1
+            self._enter_event_mode()
+            self._hold = t
+            self._event_iteration(t)
+            if t >= t_end:
+                break
+        self._evaluate(t_end, self.y)
+        for comp in system.order:
+            system.refresh_outputs(comp)
+        self._cache = (None, None, None)
+        for comp in system.order:  # what each FMU saw: its inputs at both ends, exactly
+            end = np.array(system.gather_inputs(comp))
+            self.seen[comp] = (np.array([start_inputs[comp], (end - start_inputs[comp]) / h]), h)
+        return h
