@@ -396,6 +396,45 @@ def test_recontact_after_rebound():
     assert abs(E + out["E_radiated"] - W) < 1e-6 * W
 
 
+def stepped(model, t_end, h, u, rtol):
+    """Outputs after each step of h (held inputs u) and the right-hand-side calls per step."""
+    x = model.initial_state(u)
+    calls, rows, integrate = [], [], model.integrate
+
+    def counting(*args, **kwargs):
+        sol = integrate(*args, **kwargs)
+        calls[-1] += sol.calls
+        return sol
+    model.integrate = counting
+    for k in range(int(round(t_end / h))):
+        calls.append(0)
+        x = model.advance(k * h, x, h, held(u), rtol, rtol * model.state_nominal())
+        rows.append(model.output_values((k + 1) * h, x, u))
+    return np.array(rows), calls
+
+
+def test_free_flight_support_in_closed_form():
+    """After the MO-100 impact the elastic support rings on (undamped) while a drive torque
+    pulls the rocker back (-500 N.m on J + 0.1 kg.m2): 11 ms of free flight in 1 ms steps.
+    The support is integrated in closed form there (support_flight.py): against the full
+    equations by solve_ivp at rtol 1e-12 (the scipy path), every output within 1e-8 of its
+    largest value (measured 1.2e-9 on T and u_support; the full equations on the runtime path
+    at rtol 1e-10 before the closed form: 4.1e-8 on v_support), and at most 7 right-hand-side
+    calls per free step, one Dormand-Prince step (the full equations took ~1200 per step)."""
+    u = [-500.0, 0.1]
+    reference = make()
+    reference.solver = "scipy"
+    expected, _ = stepped(reference, 12e-3, 1e-3, u, 1e-12)
+    model = make()
+    rows, calls = stepped(model, 12e-3, 1e-3, u, RTOL)
+    scale = np.maximum(np.abs(expected).max(axis=0), 1e-300)
+    worst = np.abs(rows - expected).max(axis=0) / scale
+    print(f"\nfree flight: worst {worst.max():.1e} ({model.outputs[int(worst.argmax())].name}), "
+          f"calls per step {calls}")
+    assert expected[-1, model.output_index("contact")] == 0.0
+    assert worst.max() <= 1e-8
+    assert max(calls[1:]) <= 7
+
 @pytest.mark.parametrize("effects", [COMPLIANT, HERTZ])
 def test_centre_of_percussion_support_feels_nothing(effects):
     """m r S = J: a1 = a2 = 0, T stays zero. Tolerance 1e-9 Pm: m r S - J is zero to round-off
