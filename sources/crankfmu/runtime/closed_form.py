@@ -252,11 +252,11 @@ class DampedOscillator:
             derivative, sign = poly_derivative(derivative), -sign
         return total
 
-    def damping_loss(self, h: float) -> float:
+    def damping_loss(self, h: float, end: tuple[float, float] | None = None) -> float:
         """The integral of 2 alpha u'^2 over [0, h] (per unit mass: the damper's dissipated
         energy over the mass), from the energy balance
-        d/ds (u'^2/2 + k2 u^2/2) = F u' - 2 alpha u'^2."""
-        (u_a, v_a), (u_b, v_b) = self.state(0.0), self.state(h)
+        d/ds (u'^2/2 + k2 u^2/2) = F u' - 2 alpha u'^2. end: state(h), if at hand."""
+        (u_a, v_a), (u_b, v_b) = self.state(0.0), end or self.state(h)
         return self.work(h) - 0.5 * (v_b * v_b - v_a * v_a + self.k2 * (u_b * u_b - u_a * u_a))
 
 

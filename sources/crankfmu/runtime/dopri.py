@@ -258,6 +258,21 @@ def dense_value(dense: list, t: float) -> Vector:
     return dense[-1](t)
 
 
+def moments(dense: list, origin: float, index: int, count: int) -> list:
+    """The integrals of (t - origin)^k x_index'(t) over the integration that appended the steps
+    to `dense`, k = 0 ... count - 1: the method's own quadrature (its weights on the stages),
+    as accurate as the state x_index itself (k = 0: its change)."""
+    out = [0.0] * count
+    for step in dense:
+        for b, c, rates in zip(_B, _C, step.stages):
+            if b:
+                s, weight = step.t0 - origin + c * step.h, b * step.h * rates[index]
+                for j in range(count):
+                    out[j] += weight
+                    weight *= s
+    return out
+
+
 def _coarse(h: float) -> float:
     """h to 20 significant bits. The step carried to the next call must not depend on the last
     bits of the call's interval: hosts count time differently (t0 + k h, integer nanoseconds),

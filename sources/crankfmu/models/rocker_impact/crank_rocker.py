@@ -238,14 +238,16 @@ class CrankRockerHammer(RockerImpact):
         o = self._theta
         u0, v0 = self._support(x)
         phi, w = self.crank_motion(x, u)
-        return self._hammer_energy(x, u, self.rod(u0, v0, x[o], x[o + 1], phi, w)[4])
+        stretch = self.rod(u0, v0, x[o], x[o + 1], phi, w)[4]
+        return self._rocker_energy(x, self.p.J) + self._linkage_energy(x, u, stretch)
 
-    def _hammer_energy(self, x, u, stretch: float) -> float:
+    def _linkage_energy(self, x, u, stretch: float) -> float:
+        """Crank + motor kinetic energy (none with driven_crank) and the rod's spring energy."""
         crank = 0.0
         if not self._driven:
             w = x[-3]
             crank = 0.5 * self._crank_inertia(u) * w * w
-        return self._rocker_energy(x, self.p.J) + crank + 0.5 * self.p.k_rod * stretch ** 2
+        return crank + 0.5 * self.p.k_rod * stretch ** 2
 
     def monitor_functions(self, u_of_t):
         """P' = 0 as in RockerImpact; with the elastic support T' = k(u0) u0' + d0 u0'' = 0,
@@ -275,5 +277,5 @@ class CrankRockerHammer(RockerImpact):
         out.update(flange_w=i * w, flange_phi=i * phi, phi=phi, w_crank=w, theta=th, omega=om,
                    F_rod=F, M_load=-M_crank / i, W_drive=x[-2], E_damped=x[-1],
                    shaft_tau=M_crank / i, shaft_J=self._crank_inertia(u) / (i * i),
-                   E_mech=self._hammer_energy(x, u, stretch))
+                   E_mech=out["E_mech"] + self._linkage_energy(x, u, stretch))
         return out
