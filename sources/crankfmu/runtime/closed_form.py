@@ -134,24 +134,6 @@ def poly_critical_points(c: Poly) -> list[float]:
     return roots
 
 
-def poly_through(nodes: Sequence[float], values: Sequence[float]) -> list[float]:
-    """Coefficients (lowest power first) of the polynomial of degree len(nodes) - 1 through the
-    points (nodes[i], values[i]): Newton's divided differences, expanded to powers of s."""
-    n = len(nodes)
-    diffs = list(values)
-    for level in range(1, n):
-        for i in range(n - 1, level - 1, -1):
-            diffs[i] = (diffs[i] - diffs[i - 1]) / (nodes[i] - nodes[i - level])
-    coefficients = [diffs[-1]]
-    for i in range(n - 2, -1, -1):  # c(s) = diffs[i] + (s - nodes[i]) c(s), Horner in reverse
-        shifted = [0.0] + coefficients
-        for k, a in enumerate(coefficients):
-            shifted[k] -= nodes[i] * a
-        shifted[0] += diffs[i]
-        coefficients = shifted
-    return coefficients
-
-
 def oscillator_particular(alpha: float, k2: float, forcing: Poly) -> list[float]:
     """The polynomial p with p'' + 2 alpha p' + k2 p = F (coefficients, lowest power first; at
     least two, so that p(0) and p'(0) are p[0] and p[1])."""

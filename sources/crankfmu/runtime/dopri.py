@@ -180,8 +180,8 @@ def integrate(f: Callable[[float, Vector], Sequence[float]], t0: float, x0: Sequ
     h_start: the step to try first (the previous call's `h_next`); None selects one as scipy
     does. atol: per state, or one for all. events: g(t, x) with optional attributes `terminal`
     (bool) and `direction` (-1, 0, +1). Raises WorkLimitError past max_calls right-hand-side
-    evaluations (checked before each step attempt). dense: a list to which each accepted step's
-    dense output is appended (`dense_value` reads it at any time of the integration). max_step:
+    evaluations (checked before each step attempt). dense: a list to which each accepted step is
+    appended (its interpolant, callable on [t0, t0 + h]; its stages, for `moments`). max_step:
     no step longer (for a right-hand side with a known fast term the error estimate would
     not see between the stages).
     """
@@ -247,15 +247,6 @@ def integrate(f: Callable[[float, Vector], Sequence[float]], t0: float, x0: Sequ
             g_old = g_new
         t, x, k1 = t_new, x_new, stages[6]
     return Integration(0, t, x, _coarse(h_next), None, crossings, calls)
-
-
-def dense_value(dense: list, t: float) -> Vector:
-    """The state at t from the dense output `integrate` appended to `dense` (4th order, as
-    for events; t within the integrated interval)."""
-    for step in dense:
-        if t <= step.t0 + step.h:
-            return step(t)
-    return dense[-1](t)
 
 
 def moments(dense: list, origin: float, index: int, count: int) -> list:

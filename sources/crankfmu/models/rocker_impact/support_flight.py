@@ -84,15 +84,14 @@ class SupportFlight:
                                                    z[2:], self.u_of_t(s), 0.0)
         return (J_t * F_axis - self.mr * torque) / self.det, [torque / J_t] + tail
 
-    def linearised(self, s, z, u0, v0, previous=None, G=None):
+    def linearised(self, s, z, u0, v0, previous=None):
         """(R, G_u, G_v, f_u, f_v): G's and the rates' derivatives by u0 and u0' (differences)
         and R = G - G_u u0 - G_v u0'. With `previous` (its derivatives, kept while ringing
-        weaker than FROZEN_ENOUGH of u0's tolerance makes them irrelevant) only R, from G if
-        given."""
+        weaker than FROZEN_ENOUGH of u0's tolerance makes them irrelevant) only R, from the
+        last call of the slow equations if that was at s."""
         if previous is not None:
             _, G_u, G_v, f_u, f_v = previous
-            if G is None:
-                G = self.loads(s, z, u0, v0)[0]
+            G = self.last[1] if self.last[0] == s else self.loads(s, z, u0, v0)[0]
             return G - G_u * u0 - G_v * v0, G_u, G_v, f_u, f_v
         G, f = self.loads(s, z, u0, v0)
         du, dv = self.steps_u
@@ -153,7 +152,7 @@ class SupportFlight:
             H = sol.t - t
             z_end, u_end, v_end, _, _ = self.true_state(osc, H, sol.x)
             ringing = osc.ringing_bound(0.0)
-            end = self.linearised(sol.t, z_end, u_end, v_end, G=self.last[1], previous=(
+            end = self.linearised(sol.t, z_end, u_end, v_end, previous=(
                 start if ringing * max(abs(self.G_u), abs(self.G_v) * osc.omega)
                 < FROZEN_ENOUGH * k2 * self.atol_u else None))
             shaken = self.shaken(osc, ringing, end)
