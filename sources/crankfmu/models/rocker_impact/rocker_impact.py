@@ -318,7 +318,7 @@ class RockerImpact(PhysicsModel):
         return x
 
     def output_values(self, t, x, u):
-        return np.array(self.output_vector(self._output_dict(t, x, u)))
+        return self.output_vector(self._output_dict(t, x, u))
 
     def _output_dict(self, t, x, u) -> dict:
         o = self._theta
