@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from ...runtime.model import Effect, ParameterError, Variable
+from ...runtime.model import Effect, IntegrationError, ParameterError, Variable
 from ...runtime.driven_crank import SHAFT_INPUTS, SHAFT_NAMES, crank_from_shaft
 from .rocker_impact import RockerImpact
 from ...runtime.roots import brentq
@@ -229,6 +229,9 @@ class CrankRockerHammer(RockerImpact):
         _, M_rocker, F_axis, M_crank, _, rate = self.rod(u0, v0, th, om, tail[0], w)
         drive = p.gear_ratio * u[self.IN.flange_tau]
         J_crank = p.J_crank + self._i2 * u[self.IN.flange_J]  # as _crank_inertia, inline: hot
+        if J_crank == 0.0:
+            raise IntegrationError(f"{self.model_name}: no inertia on the crank shaft (J_crank = "
+                                   f"0 and flange_J = 0): the crank's acceleration is not finite")
         return M_rocker, F_axis, p.J, [w, (drive + M_crank) / J_crank, drive * w,
                                        p.c_rod * rate * rate + support_power]
 
