@@ -221,19 +221,17 @@ class CrankRockerHammer(RockerImpact):
     def _load(self, t, u0, v0, th, om, tail, u, support_power):
         """The rod's pull on the rocker, and the crank's and the energies' rates."""
         p = self.p
+        phi, w = self._crank(tail, u)
+        _, M_rocker, F_axis, M_crank, _, rate = self.rod(u0, v0, th, om, phi, w)
+        loss = p.c_rod * rate * rate + support_power
         if self._driven:  # the driver integrates the crank; W_drive: the crank's work on the rod
-            phi, w = crank_from_shaft(self, u)
-            _, M_rocker, F_axis, M_crank, _, rate = self.rod(u0, v0, th, om, phi, w)
-            return M_rocker, F_axis, p.J, [-M_crank * w, p.c_rod * rate * rate + support_power]
-        w = tail[1]
-        _, M_rocker, F_axis, M_crank, _, rate = self.rod(u0, v0, th, om, tail[0], w)
+            return M_rocker, F_axis, p.J, [-M_crank * w, loss]
         drive = p.gear_ratio * u[self.IN.flange_tau]
-        J_crank = p.J_crank + self._i2 * u[self.IN.flange_J]  # as _crank_inertia, inline: hot
+        J_crank = self._crank_inertia(u)
         if J_crank == 0.0:
             raise IntegrationError(f"{self.model_name}: no inertia on the crank shaft (J_crank = "
                                    f"0 and flange_J = 0): the crank's acceleration is not finite")
-        return M_rocker, F_axis, p.J, [w, (drive + M_crank) / J_crank, drive * w,
-                                       p.c_rod * rate * rate + support_power]
+        return M_rocker, F_axis, p.J, [w, (drive + M_crank) / J_crank, drive * w, loss]
 
     def mechanical_energy(self, x, u) -> float:
         """Rocker (own J) and support, contact, crank + motor kinetic energy, rod spring

@@ -481,6 +481,7 @@ class RockerImpact(PhysicsModel):
         return SupportFlight(self, t, x, J_t, u_of_t, rtol, atol).run(t_end)
 
     def _free_pinned(self, t, x, t_end, u_of_t, rtol, atol):
+        """Pinned: the rocker and the subclass's states, up to t_end or where contact begins."""
         S, w_tool, gap, load = self.p.S, x[2], self._gap, self._load
 
         def rates(s, z, u):
