@@ -4,7 +4,6 @@ hammer_bearings.toml). Model cards: sources/crankfmu/models/rocker_impact/README
 Run with -s to print the measured figures."""
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
@@ -19,6 +18,7 @@ from crankfmu.models.rocker_impact.crank_rocker import CrankRockerHammer
 from crankfmu.models.rocker_impact.rocker_impact import RockerImpact
 from crankfmu.system.load import load_scene
 from crankfmu.system.scene import apply_overrides
+from tests.support.stepping import stepped
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 S_P = RockerData().S_percussion
@@ -191,28 +191,6 @@ def bearing_hammer(solver):
     model = CrankRockerHammer(comp.parameters, comp.effects)
     model.solver = solver
     return model
-
-
-def stepped(model, t_end, h, u, rtol):
-    """Outputs after each step of h (held inputs u), the right-hand-side calls per step, and the
-    state and solver state before the last step (for a repeat)."""
-    x = model.initial_state(u)
-    calls, rows, integrate = [], [], model.integrate
-
-    def counting(*args, **kwargs):
-        sol = integrate(*args, **kwargs)
-        calls[-1] += sol.calls
-        return sol
-    model.integrate = counting
-    n = int(round(t_end / h))
-    for k in range(n):
-        if k == n - 1:
-            before = (list(x), json.loads(json.dumps(model.discrete_state())),
-                      json.loads(json.dumps(model.solver_state())))
-        calls.append(0)
-        x = model.advance(k * h, x, h, held(u), rtol, rtol * model.state_nominal())
-        rows.append(model.output_values((k + 1) * h, x, u))
-    return np.array(rows), calls, before
 
 
 def test_hammer_free_flight_with_the_elastic_support():
