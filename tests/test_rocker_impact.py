@@ -22,6 +22,7 @@ from crankfmu.studies.rocker_analysis import (K_N_VALUES, RockerData, cascade_ma
                                               format_impact_table, impact_table, linearise,
                                               second_approximation, validity)
 from crankfmu.models.rocker_impact.rocker_impact import RockerImpact
+from tests.support.stepping import stepped
 
 RTOL = 1e-10                 # model's internal relative tolerance in these tests
 MO100 = RockerData()         # J, m, r, R_c, d, V0, E, rho, nu of the seed; S = 1.1 J/(m r)
@@ -395,6 +396,28 @@ def test_recontact_after_rebound():
     W = tau * (th - theta0)
     assert abs(E + out["E_radiated"] - W) < 1e-6 * W
 
+
+def test_free_flight_support_in_closed_form():
+    """After the MO-100 impact the elastic support rings on (undamped) while a drive torque
+    pulls the rocker back (-500 N.m on J + 0.1 kg.m2): 11 ms of free flight in 1 ms steps.
+    The support is integrated in closed form there (support_flight.py): against the full
+    equations by solve_ivp at rtol 1e-12 (the scipy path), every output within 1e-8 of its
+    largest value (measured 1.2e-9 on T and u_support; the full equations on the runtime path
+    at rtol 1e-10 before the closed form: 4.1e-8 on v_support), and at most 7 right-hand-side
+    calls per free step, one Dormand-Prince step (the full equations took ~1200 per step)."""
+    u = [-500.0, 0.1]
+    reference = make()
+    reference.solver = "scipy"
+    expected, _, _ = stepped(reference, 12e-3, 1e-3, u, 1e-12)
+    model = make()
+    rows, calls, _ = stepped(model, 12e-3, 1e-3, u, RTOL)
+    scale = np.maximum(np.abs(expected).max(axis=0), 1e-300)
+    worst = np.abs(rows - expected).max(axis=0) / scale
+    print(f"\nfree flight: worst {worst.max():.1e} ({model.outputs[int(worst.argmax())].name}), "
+          f"calls per step {calls}")
+    assert expected[-1, model.output_index("contact")] == 0.0
+    assert worst.max() <= 1e-8
+    assert max(calls[1:]) <= 7
 
 @pytest.mark.parametrize("effects", [COMPLIANT, HERTZ])
 def test_centre_of_percussion_support_feels_nothing(effects):

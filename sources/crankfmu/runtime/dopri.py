@@ -107,13 +107,25 @@ class _Step:
 
     def __call__(self, t: float) -> Vector:
         if self.q is None:  # q[i][j] = sum_k K[k][i] P[k][j]
-            k = self.stages
-            self.q = [[sum(k[m][i] * _P[m][j] for m in range(7) if _P[m][j]) for j in range(4)]
-                      for i in range(len(self.x0))]
+            self.q = _dense_coefficients(len(self.x0))(self.stages)
         s = (t - self.t0) / self.h
         h = self.h
         return [x + h * s * (q0 + s * (q1 + s * (q2 + s * q3)))
                 for x, (q0, q1, q2, q3) in zip(self.x0, self.q)]
+
+
+@functools.lru_cache(maxsize=None)
+def _dense_coefficients(n: int):
+    """stages -> q, q[i][j] = sum_m stages[m][i] _P[m][j] over the nonzero _P[m][j] in order
+    of m (the sum as Python's sum() forms it), generated per state count as `stepper`."""
+    rows = []
+    for i in range(n):
+        terms = [" + ".join(f"k[{m}][{i}] * {_P[m][j]!r}" for m in range(7) if _P[m][j])
+                 for j in range(4)]
+        rows.append("[" + ", ".join(terms) + "]")
+    namespace = {}
+    exec(f"def coefficients(k):\n    return [{', '.join(rows)}]", namespace)  # noqa: S102
+    return namespace["coefficients"]
 
 
 @functools.lru_cache(maxsize=None)
@@ -161,13 +173,17 @@ def stepper(n: int):
 
 def integrate(f: Callable[[float, Vector], Sequence[float]], t0: float, x0: Sequence[float],
               t_end: float, rtol: float, atol: Sequence[float] | float, h_start: float | None = None,
-              events: Sequence[Callable] = (), max_calls: int = 200_000) -> Integration:
+              events: Sequence[Callable] = (), max_calls: int = 200_000,
+              dense: list | None = None, max_step: float = math.inf) -> Integration:
     """Integrate x' = f(t, x) from t0 to t_end (> t0).
 
     h_start: the step to try first (the previous call's `h_next`); None selects one as scipy
     does. atol: per state, or one for all. events: g(t, x) with optional attributes `terminal`
     (bool) and `direction` (-1, 0, +1). Raises WorkLimitError past max_calls right-hand-side
-    evaluations (checked before each step attempt).
+    evaluations (checked before each step attempt). dense: a list to which each accepted step is
+    appended (its interpolant, callable on [t0, t0 + h]; its stages, for `moments`). max_step:
+    no step longer (for a right-hand side with a known fast term the error estimate would
+    not see between the stages).
     """
     x = list(x0)
     atol = per_state(atol, len(x))
@@ -185,6 +201,8 @@ def integrate(f: Callable[[float, Vector], Sequence[float]], t0: float, x0: Sequ
     crossings = []
     rejected = False
     while t < t_end:
+        if h > max_step:
+            h = max_step
         if h < 10.0 * EPS * max(abs(t), 1e-300):
             raise WorkLimitError(f"step size {h:.3g} s below round-off at t = {t:.9g} s")
         if calls > max_calls:  # counted per attempt: a wrapper per call would cost more
@@ -211,11 +229,15 @@ def integrate(f: Callable[[float, Vector], Sequence[float]], t0: float, x0: Sequ
         # a step cut short by t_end says nothing about the step size the problem allows
         h_next = h * factor if not last or h_try >= h else max(h, h_try * factor)
         h = h_next
+        step = None
+        if dense is not None:
+            step = _Step(t, h_try, x, stages)
+            dense.append(step)
         if events:
             g_new = [g(t_new, x_new) for g in events]
             hit = None
             if any(a * b <= 0.0 for a, b in zip(g_old, g_new)):  # a sign change or a zero
-                step = _Step(t, h_try, x, stages)
+                step = step or _Step(t, h_try, x, stages)
                 hit = _locate(events, g_old, g_new, t, t_new, step, crossings)
             if hit is not None:  # step again to the event: the 5th-order solution there,
                 index, te = hit  # not the 4th-order dense output, which the error test skips
@@ -225,6 +247,21 @@ def integrate(f: Callable[[float, Vector], Sequence[float]], t0: float, x0: Sequ
             g_old = g_new
         t, x, k1 = t_new, x_new, stages[6]
     return Integration(0, t, x, _coarse(h_next), None, crossings, calls)
+
+
+def moments(dense: list, origin: float, index: int, count: int) -> list:
+    """The integrals of (t - origin)^k x_index'(t) over the integration that appended the steps
+    to `dense`, k = 0 ... count - 1: the method's own quadrature (its weights on the stages),
+    as accurate as the state x_index itself (k = 0: its change)."""
+    out = [0.0] * count
+    for step in dense:
+        for b, c, rates in zip(_B, _C, step.stages):
+            if b:
+                s, weight = step.t0 - origin + c * step.h, b * step.h * rates[index]
+                for j in range(count):
+                    out[j] += weight
+                    weight *= s
+    return out
 
 
 def _coarse(h: float) -> float:

@@ -330,11 +330,15 @@ class PhysicsModel:
             raise IntegrationError(f"{self.model_name}: input not finite at t = {t0:.9g} s")
 
     def integrate(self, u_of_t: InputFunction, t: float, x, t_end: float, rtol: float, atol,
-                  events=()) -> Integration:
+                  events=(), derivatives=None, dense: list | None = None,
+                  max_step: float = math.inf) -> Integration:
         """One integration from t to t_end (or the first terminal event) with the model's
         solver: the runtime's Dormand-Prince (default), or scipy's solve_ivp with the method in
-        `integrator` (solver = "scipy": the cross-check, and the monolithic reference)."""
-        derivatives = self.derivatives
+        `integrator` (solver = "scipy": the cross-check, and the monolithic reference).
+        derivatives: a right-hand side (t, x, u) other than the model's `derivatives` (a model
+        that integrates part of its states in closed form); dense, max_step: the accepted
+        steps' dense output and the longest step (runtime solver only, see dopri.integrate)."""
+        derivatives = derivatives or self.derivatives
         if getattr(u_of_t, "moving", True):
             def rhs(s, y):
                 return derivatives(s, y, u_of_t(s))
@@ -352,7 +356,7 @@ class PhysicsModel:
                 sol = dopri.integrate(rhs, t, x, t_end, TOLERANCE_FACTOR * rtol,
                                       [TOLERANCE_FACTOR * a for a in dopri.per_state(atol,
                                                                                    len(x))],
-                                      self._h_next, events, limit)
+                                      self._h_next, events, limit, dense, max_step)
                 self._h_next = sol.h_next
         except dopri.IntegrationFailure as err:
             raise IntegrationError(f"{self.model_name}: {err}") from None

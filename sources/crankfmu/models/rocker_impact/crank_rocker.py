@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from ...runtime.model import Effect, ParameterError, Variable
+from ...runtime.model import Effect, IntegrationError, ParameterError, Variable
 from ...runtime.driven_crank import SHAFT_INPUTS, SHAFT_NAMES, crank_from_shaft
 from .rocker_impact import RockerImpact
 from ...runtime.roots import brentq
@@ -83,9 +83,12 @@ class CrankRockerHammer(RockerImpact):
 
     def __init__(self, parameters=None, effects=None):
         super().__init__(parameters, effects)
-        self._L0 = self.free_length
+        p = self.p
         self._driven = self.on("driven_crank")
-        self._n_crank = 0 if self._driven else 2  # crank states phi, w_crank before the energies
+        self._i2 = p.gear_ratio ** 2
+        self._support_damping = p.support_damping
+        self._damper_state = -1  # E_damped, the last state
+        self._L0 = self.free_length
 
     def _check_geometry(self, p):
         for name in ("crank_radius", "arm_length", "gear_ratio"):
@@ -107,21 +110,26 @@ class CrankRockerHammer(RockerImpact):
     def gap(self) -> float:
         return self.p.tool_gap
 
-    def _eye(self, u0, th):
-        p = self.p
-        ang = th + p.arm_angle
-        return np.array([u0 + p.arm_length * math.sin(ang), -p.arm_length * math.cos(ang)])
+    def _eye(self, u0: float, th: float) -> tuple[float, float]:
+        """The rod eye B for the support at u0 and the rocker at th."""
+        b, ang = self.p.arm_length, th + self.p.arm_angle
+        return u0 + b * math.sin(ang), -b * math.cos(ang)
 
-    def _pin(self, phi):
+    def _pin(self, phi: float) -> tuple[float, float]:
+        """The crank pin Q at the crank angle phi."""
         p = self.p
-        return np.array([p.crank_x + p.crank_radius * math.cos(phi),
-                         p.crank_y + p.crank_radius * math.sin(phi)])
+        a = p.crank_radius
+        return p.crank_x + a * math.cos(phi), p.crank_y + a * math.sin(phi)
+
+    def _rod_length(self, u0: float, th: float, phi: float) -> float:
+        (Bx, By), (Qx, Qy) = self._eye(u0, th), self._pin(phi)
+        return math.hypot(Qx - Bx, Qy - By)
 
     @property
     def free_length(self) -> float:
         if self.p.rod_length > 0.0:
             return self.p.rod_length
-        return float(np.linalg.norm(self._pin(math.pi) - self._eye(0.0, 0.0)))
+        return self._rod_length(0.0, 0.0, math.pi)
 
     def crank_motion(self, x, u) -> tuple[float, float]:
         """(phi, phi'): the crank states, or with driven_crank the driver's shaft over the gear."""
@@ -129,33 +137,33 @@ class CrankRockerHammer(RockerImpact):
             return crank_from_shaft(self, u)
         return x[-4], x[-3]
 
-    def rod(self, x, u):
+    def rod(self, u0, v0, th, om, phi, w):
         """(F_rod, torque on the rocker about O, force on the rocker along x, torque on the
-        crank, rod stretch l - L0, rate l')."""
+        crank, rod stretch l - L0, rate l') for the support (u0, v0), the rocker (th, om) and
+        the crank (phi, w)."""
         p = self.p
-        u0, v0, th, om = self._split(x)[:4]
-        phi, w = self.crank_motion(x, u)
-        B, Q = self._eye(u0, th), self._pin(phi)
-        d = Q - B
-        ell = math.hypot(d[0], d[1])
-        e = d / ell
+        a, b = p.crank_radius, p.arm_length
         ang = th + p.arm_angle
-        dB = np.array([v0 + p.arm_length * om * math.cos(ang), p.arm_length * om * math.sin(ang)])
-        dQ = p.crank_radius * w * np.array([-math.sin(phi), math.cos(phi)])
-        rate = float(e @ (dQ - dB))
+        sin_a, cos_a = math.sin(ang), math.cos(ang)
+        sin_p, cos_p = math.sin(phi), math.cos(phi)
+        rBx, rBy = b * sin_a, -b * cos_a                  # B - O
+        rQx, rQy = a * cos_p, a * sin_p                   # Q - A
+        dx, dy = p.crank_x + rQx - u0 - rBx, p.crank_y + rQy - rBy
+        ell = math.hypot(dx, dy)
+        ex, ey = dx / ell, dy / ell
+        # l' = e . (Q' - B'), B' = (v0 + b om cos, b om sin), Q' = a w (-sin, cos)
+        rate = ex * (-a * w * sin_p - v0 - b * om * cos_a) + ey * (a * w * cos_p - b * om * sin_a)
         stretch = ell - self._L0
         F = p.k_rod * stretch + p.c_rod * rate
-        rB = B - np.array([u0, 0.0])
-        rQ = Q - np.array([p.crank_x, p.crank_y])
-        M_rocker = F * (rB[0] * e[1] - rB[1] * e[0])
-        M_crank = -F * (rQ[0] * e[1] - rQ[1] * e[0])
-        return F, M_rocker, F * e[0], M_crank, stretch, rate
+        return (F, F * (rBx * ey - rBy * ex), F * ex, -F * (rQx * ey - rQy * ex), stretch, rate)
 
     def kinematic_theta(self, phi: float) -> float:
         """Rocker angle with the rod at its free length (pivot at rest), on the branch
         -pi/2 < theta <= small (the rocker hangs toward the tool side of its swing)."""
         L0 = self.free_length
-        f = lambda th: float(np.linalg.norm(self._pin(phi) - self._eye(0.0, th))) - L0
+
+        def f(th):
+            return self._rod_length(0.0, th, phi) - L0
         lo, hi = -math.pi / 2, 0.5
         if f(lo) * f(hi) > 0.0:
             raise ParameterError(self.model_name, "phi_start", self.p.phi_start,
@@ -171,14 +179,8 @@ class CrankRockerHammer(RockerImpact):
         crank = [] if self._driven else [1.0, 30.0]
         return np.concatenate([super().state_nominal(), crank + [1e3, 1e3]])
 
-    def _split(self, x):
-        if self.compliant:
-            return tuple(x[:8])
-        return (0.0, 0.0) + tuple(x[:6])
-
     def initial_state(self, u):
         p = self.p
-        self._K_cache, self._Z_cache = self.K, self.Z
         c, c0 = self.stiffnesses(0.0)        # the rocker alone strikes: its own J
         theta = self.kinematic_theta(p.phi_start)
         if p.S * theta - self.gap > 0.0:
@@ -186,78 +188,95 @@ class CrankRockerHammer(RockerImpact):
                                  f">= S theta_start = {p.S * theta:.6g} m (the rocker may not "
                                  f"start inside the tool)")
         crank = [] if self._driven else [p.phi_start, 0.0]
-        x = np.array(([0.0, 0.0] if self.compliant else []) +
-                     [theta, 0.0, 0.0, 0.0, 0.0, 0.0] + crank + [0.0, 0.0])
+        x = (([0.0, 0.0] if self._compliant else []) +
+             [theta, 0.0, 0.0, 0.0, 0.0, 0.0] + crank + [0.0, 0.0])
         self._d = self._fresh_discrete(c, c0, False)
+        self._use_stiffnesses()
+        self._carried = None
         return x
 
     def _crank_inertia(self, u) -> float:
-        return self.p.J_crank + self.p.gear_ratio ** 2 * u[self.IN.flange_J]
+        return self.p.J_crank + self._i2 * u[self.IN.flange_J]
 
     def shaft_load(self, x, u) -> tuple[float, float]:
         """(shaft_tau, shaft_J) at the input shaft: M_rod/i and J_cr/i^2."""
         i = self.p.gear_ratio
-        return self.rod(x, u)[3] / i, self._crank_inertia(u) / (i * i)
+        o = self._theta
+        u0, v0 = self._support(x)
+        phi, w = self.crank_motion(x, u)
+        return self.rod(u0, v0, x[o], x[o + 1], phi, w)[3] / i, self._crank_inertia(u) / (i * i)
 
-    def _support_force(self, u0, v0):
-        return self._spring(u0) + self.p.support_damping * v0
+    def _rocker_inertia(self, u) -> float:
+        return self.p.J  # the motor's inertia is on the crank, not the rocker
 
-    def _accelerations(self, x, u, P):
-        _, M_rocker, F_axis, _, _, _ = self.rod(x, u)
-        return self._rocker_accelerations(x, P, M_rocker, self.p.J, F_axis)
+    def _crank(self, tail, u) -> tuple[float, float]:
+        """(phi, phi') from the states after the rocker's, or from the driver's shaft."""
+        return crank_from_shaft(self, u) if self._driven else (tail[0], tail[1])
 
-    def derivatives(self, t, x, u):
+    def _pull(self, t, u0, v0, th, om, tail, u):
+        phi, w = self._crank(tail, u)
+        _, M_rocker, F_axis, _, _, _ = self.rod(u0, v0, th, om, phi, w)
+        return M_rocker, F_axis
+
+    def _load(self, t, u0, v0, th, om, tail, u, support_power):
+        """The rod's pull on the rocker, and the crank's and the energies' rates."""
         p = self.p
-        P = self._force(x)
-        F, M_rocker, F_axis, M_crank, _, rate = self.rod(x, u)
-        ddu, ddth, _ = self._rocker_accelerations(x, P, M_rocker, p.J, F_axis)
-        _, v0, _, om = self._split(x)[:4]
-        _, w = self.crank_motion(x, u)
-        loss = p.c_rod * rate * rate + (p.support_damping * v0 * v0 if self.compliant else 0.0)
-        rocker = [om, ddth, P / self._Z, P, P * P / self._Z, 1.0 if self._d["contact"] else 0.0]
+        phi, w = self._crank(tail, u)
+        _, M_rocker, F_axis, M_crank, _, rate = self.rod(u0, v0, th, om, phi, w)
+        loss = p.c_rod * rate * rate + support_power
         if self._driven:  # the driver integrates the crank; W_drive: the crank's work on the rod
-            crank = [-M_crank * w, loss]
-        else:
-            drive = p.gear_ratio * u[self.IN.flange_tau]
-            crank = [w, (drive + M_crank) / self._crank_inertia(u), drive * w, loss]
-        return ([v0, ddu] if self.compliant else []) + rocker + crank
+            return M_rocker, F_axis, p.J, [-M_crank * w, loss]
+        drive = p.gear_ratio * u[self.IN.flange_tau]
+        J_crank = self._crank_inertia(u)
+        if J_crank == 0.0:
+            raise IntegrationError(f"{self.model_name}: no inertia on the crank shaft (J_crank = "
+                                   f"0 and flange_J = 0): the crank's acceleration is not finite")
+        return M_rocker, F_axis, p.J, [w, (drive + M_crank) / J_crank, drive * w, loss]
 
     def mechanical_energy(self, x, u) -> float:
         """Rocker (own J) and support, contact, crank + motor kinetic energy, rod spring
         (driven_crank: without the crank's kinetic energy, which the driver carries)."""
-        stretch = self.rod(x, u)[4]
-        no_drive = [0.0] * len(self.inputs)  # the motor's inertia is on the crank, not the rocker
-        rocker = super().mechanical_energy(x, no_drive)
+        o = self._theta
+        u0, v0 = self._support(x)
+        phi, w = self.crank_motion(x, u)
+        stretch = self.rod(u0, v0, x[o], x[o + 1], phi, w)[4]
+        return self._rocker_energy(x, self.p.J) + self._linkage_energy(x, u, stretch)
+
+    def _linkage_energy(self, x, u, stretch: float) -> float:
+        """Crank + motor kinetic energy (none with driven_crank) and the rod's spring energy."""
         crank = 0.0
         if not self._driven:
             w = x[-3]
             crank = 0.5 * self._crank_inertia(u) * w * w
-        return rocker + crank + 0.5 * self.p.k_rod * stretch ** 2
+        return crank + 0.5 * self.p.k_rod * stretch ** 2
 
     def monitor_functions(self, u_of_t):
         """P' = 0 as in RockerImpact; with the elastic support T' = k(u0) u0' + d0 u0'' = 0,
         k = dT/du0 of the bearing's spring."""
         monitors = super().monitor_functions(u_of_t)
-        if not (self._d["contact"] and self.compliant and self.p.support_damping > 0.0):
+        if not (self._d["contact"] and self._compliant and self._support_damping > 0.0):
             return monitors
+        o, d0 = self._theta, self._support_damping
 
         def t_extremum(t, x):
-            u = u_of_t(t)
-            ddu = self._accelerations(x, u, self._force(x))[0]
-            return self.spring_rate(x[0]) * x[1] + self.p.support_damping * ddu
+            u0, v0 = x[0], x[1]
+            torque, F_axis = self._pull(t, u0, v0, x[o], x[o + 1], x[o + 6:], u_of_t(t))
+            ddu = self._accelerations(u0, v0, self._force(x), torque, self.p.J, F_axis)[0]
+            return self.spring_rate(u0) * v0 + d0 * ddu
         t_extremum.terminal, t_extremum.direction = False, 0.0
         return [monitors[0], t_extremum]
 
     def _output_dict(self, t, x, u) -> dict:
-        out = super()._output_dict(t, x, u)
         p = self.p
-        F, _, _, M_crank, _, _ = self.rod(x, u)
-        _, _, th, om = self._split(x)[:4]
+        o = self._theta
+        u0, v0 = self._support(x)
+        th, om = x[o], x[o + 1]
         phi, w = self.crank_motion(x, u)
-        W, E_d = x[-2:]
-        tau, J = self.shaft_load(x, u)
-        out.update(flange_w=p.gear_ratio * w, flange_phi=p.gear_ratio * phi, phi=phi,
-                   w_crank=w, theta=th, omega=om, F_rod=F, M_load=-M_crank / p.gear_ratio,
-                   W_drive=W, E_damped=E_d, shaft_tau=tau, shaft_J=J,
-                   E_mech=self.mechanical_energy(x, u))
+        F, M_rocker, F_axis, M_crank, stretch, _ = self.rod(u0, v0, th, om, phi, w)
+        out = self._rocker_outputs(x, M_rocker, F_axis, p.J)
+        i = p.gear_ratio
+        out.update(flange_w=i * w, flange_phi=i * phi, phi=phi, w_crank=w, theta=th, omega=om,
+                   F_rod=F, M_load=-M_crank / i, W_drive=x[-2], E_damped=x[-1],
+                   shaft_tau=M_crank / i, shaft_J=self._crank_inertia(u) / (i * i),
+                   E_mech=out["E_mech"] + self._linkage_energy(x, u, stretch))
         return out
