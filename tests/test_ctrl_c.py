@@ -16,7 +16,7 @@ import json
 import signal
 
 from tests.conftest import ROOT
-from tests.support.fuzz.ctrl_c import ROTOR, campaign
+from tests.support.fuzz.ctrl_c import campaign, rotor
 
 
 def test_ctrl_c_20_of_20_at_random_times(tmp_path, fmu_dir):
@@ -37,7 +37,7 @@ def test_ctrl_c_during_the_estimate_companion_keeps_the_run_and_exits_130(tmp_pa
     from crankfmu.cli import main
     from crankfmu.cosim import runner
     scene = tmp_path / "rotor.toml"
-    scene.write_text(ROTOR.format(stop=0.05))
+    scene.write_text(rotor(0.05))
     fixed_steps = runner._fixed_steps
 
     def steps(master, scene, progress):

@@ -13,9 +13,14 @@ crankfmu.studies.executor); in the worker, its figures are computed from the sce
 [analysis] table with crankfmu.studies.compare's metric code: strokes, cycle time, mean crank speed,
 delta, energy per stroke, peak drive and load torque, and the [analysis].events variables at the
 run's end (hybrid scenes). DIR/sweep.csv holds one row per run: `run`, one column per varied
-parameter (named COMP.PARAM), the figures, `status` (completed, failed, refused, error, lost),
-`reason` and `wall_seconds`; rows are appended as runs finish and the file is rewritten in grid
-order at the end. DIR/sweep.json names the study (scene, settings, grid, FMU digests): a
+parameter (named COMP.PARAM), the figures, `status` (completed; "figures missing" when the run
+completed without all its figures, e.g. no whole revolution after from_time; "unreliable" when
+its port energy says it lost the solution, crankfmu.cosim.trust; failed, refused, error, lost),
+`reason` (why, for every status but completed) and `wall_seconds`; rows are appended as runs
+finish and the file is rewritten in grid order at the end. At most MAX_RUNS points, counted
+before the grid is made; values must be finite; the analysis window must start before the stop
+time; the output folder and its names are checked, and the folder locked, before any run
+(crankfmu.outputs). DIR/sweep.json names the study (scene, settings, grid, FMU digests): a
 second call with the same study keeps the rows already there and runs only the missing ones
 (and the "lost" ones: a worker died); another study in the same DIR is refused.
 DIR/sweep.png plots each figure against each varied parameter.

@@ -24,6 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .scenes import ROTOR  # the fuzz's short scene: "rotor", 0.05 s at 1 ms steps
+
 LAUNCHER = """
 import atexit, runpy, sys, time
 def last_exit_handler():  # registered first, so it runs last: a long shutdown to interrupt
@@ -35,29 +37,12 @@ sys.argv = ["crankfmu"] + sys.argv[1:]
 runpy.run_module("crankfmu", run_name="__main__", alter_sys=True)
 """
 
-ROTOR = """
-[scene]
-name = "rotor"
-stop_time = {stop}
-[master]
-step = 1e-3
-[components.r1]
-fmu = "Rotor"
-parameters = {{ J = 1.0, c = 10.0, w0 = 2.0 }}
-[components.r2]
-fmu = "ShaftRotor"
-parameters = {{ J = 0.5, k = 100.0, d_s = 0.5 }}
-[[connections]]
-from = "r1.flange_w"
-to = "r2.flange_w"
-[[connections]]
-from = "r2.flange_tau"
-to = "r1.flange_tau"
-[record]
-variables = ["r1.flange_w", "r2.w"]
-"""
-
 PHASES = ("imports", "run", "shutdown")
+
+
+def rotor(stop: float) -> str:
+    """The fuzz's rotor scene with another stop time [s]."""
+    return ROTOR.replace("stop_time = 0.05", f"stop_time = {stop!r}")
 
 
 def start(scene: Path, out: Path, fmu_dir: Path, cwd: Path, *extra) -> subprocess.Popen:
@@ -80,7 +65,7 @@ def _wait_for_shutdown(proc: subprocess.Popen) -> None:
 def trial(phase: str, rng: random.Random, work: Path, fmu_dir: Path, cwd: Path) -> dict:
     """One Ctrl-C in `phase`; returns phase, delay, status, stderr, clean (see the docstring)."""
     scene = work / f"ctrl_c_{phase}.toml"
-    scene.write_text(ROTOR.format(stop=1000.0 if phase == "run" else 0.02))
+    scene.write_text(rotor(1000.0 if phase == "run" else 0.02))
     out = work / f"ctrl_c_{phase}_{rng.random():.9f}"
     proc = start(scene, out, fmu_dir, cwd, "--no-estimate")
     if phase == "imports":
