@@ -138,6 +138,7 @@ def cmd_run(args) -> int:
     from .cosim.results import check_run_set
     from .cosim.runner import RunOptions, run_scene
     from .system.scene import _number
+
     scene = load_with_options(args)
     if args.target is not None:
         scene.master.target = _number(scene.path, "--target", args.target, positive=True,

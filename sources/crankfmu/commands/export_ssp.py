@@ -21,10 +21,10 @@ def register(sub) -> None:
 
 def run_export(args) -> int:
     from ..cli import load_with_options
+    from ..outputs import check_files
     from ..system.wiring import default_fmu_dir
     from ..system.ssp_export import describe_fmus, export_ssp, lossy_parts
 
-    from ..outputs import check_files
     scene = load_with_options(args)
     out, = check_files(args.out or Path("results"), [f"{scene.name}.ssp"])  # before building
     fmu_dir = args.fmus or default_fmu_dir(scene)

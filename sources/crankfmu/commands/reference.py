@@ -31,6 +31,7 @@ def run_reference_command(args) -> int:
     from ..cosim.results import check_run_set, figure_png, run_figure
     from ..errors import OptionError
     from ..reference import solve_reference, write_reference
+
     scene = load_with_options(args)
     if args.rtol <= 0:
         raise OptionError(f"--rtol must be > 0, got {args.rtol}")
