@@ -1,8 +1,10 @@
-"""The full fuzz campaign of issue #16: hostile scene files, SSP archives and `--set` values,
-each case run as `crankfmu run CASE` with a time limit, and the tally.
+"""The full fuzz campaign of issues #16 and #27: hostile scene files, SSP archives, `--set`
+values and output folders, each case run as `crankfmu run CASE` with a time limit, and the
+tally; and Ctrl-C at random moments.
 
     python scripts/fuzz.py [--seed 16] [--scenes 1000] [--ssp 300] [--set all|N|0]
-                           [--timeout 60] [--ctrl-c 20] [--work DIR] [--fmus DIR]
+                           [--out-cases 160] [--timeout 60] [--ctrl-c 20] [--work DIR]
+                           [--fmus DIR]
 
 Each case runs inside a worker process (`crankfmu.cli.main` in-process, so the interpreter and
 FMU start-up are paid once per worker, not per case), with its own folder as working directory
@@ -17,8 +19,12 @@ otherwise be counted against the next. Per case the tally counts:
     traceback   any other exception     crash   the worker died (signal)    hang   timed out
     nonfinite   a written CSV holds nan or inf, or a sidecar NaN or Infinity
     outside     a file appeared outside the case's results/ folder, or at an evil path
---ctrl-c N runs a 60 s scene N times in a subprocess and sends SIGINT at a random moment:
-each must exit 130 with a partial CSV.
+The "out" family (tests/support/fuzz/outputs.py) runs with hostile output folders: files may
+appear only under the case's output folder, and the files it keeps (a FIFO, a link, a user's
+file) must stay as they were ("outside" counts both).
+--ctrl-c N sends SIGINT N times at a random moment of crankfmu's imports, run or exit handlers
+(tests/support/fuzz/ctrl_c.py): each must exit 130, say "interrupted", print no traceback, and
+leave whatever it wrote whole.
 """
 from __future__ import annotations
 
@@ -124,9 +130,18 @@ class Worker:
 
 
 # -- checks after a case -------------------------------------------------------------------------
-def _nonfinite(folder: Path) -> list[str]:
+def _regular(path: Path) -> bool:
+    """A regular file itself (not a FIFO a case made, not a link): safe to open and read."""
+    return path.is_file() and not path.is_symlink()
+
+
+def _nonfinite(folder: Path, kept: set[Path] = frozenset()) -> list[str]:
+    """Written CSVs holding nan or inf, sidecars that are not strict JSON (the files a case
+    made and keeps are the user's, not results)."""
     bad = []
-    for csv in folder.rglob("*.csv"):
+    def written(path: Path) -> bool:
+        return _regular(path) and path not in kept
+    for csv in filter(written, folder.rglob("*.csv")):
         with open(csv, errors="replace") as f:
             f.readline()
             for line in f:
@@ -136,7 +151,7 @@ def _nonfinite(folder: Path) -> list[str]:
                     break
     def refuse(constant):
         raise ValueError(constant)
-    for sidecar in folder.rglob("*.json"):
+    for sidecar in filter(written, folder.rglob("*.json")):
         try:  # strict JSON: NaN, Infinity and -Infinity are not numbers there
             json.loads(sidecar.read_text(errors="replace"), parse_constant=refuse)
         except ValueError:
@@ -144,11 +159,17 @@ def _nonfinite(folder: Path) -> list[str]:
     return bad
 
 
-def _outside(case_dir: Path, before: set[str], evil: list[str]) -> list[str]:
+def _outside(case_dir: Path, before: set[str], case: dict, kept_before: dict) -> list[str]:
+    """Files that appeared outside the case's output folder (default work/results), evil paths
+    that exist, and kept files that changed (kind, inode or bytes)."""
+    from tests.support.fuzz.scenes import snapshot
     work = case_dir / "work"
+    allowed = os.path.normpath(work / case.get("out", "results")) + os.sep
     now = {str(p.relative_to(case_dir)) for p in case_dir.rglob("*")}
-    new = [p for p in now - before if not p.startswith("work/results")]
-    for e in evil:
+    new = [p for p in now - before  # under the output folder, or a folder on the way to it
+           if not ((os.path.normpath(case_dir / p) + os.sep).startswith(allowed) or
+                   allowed.startswith(os.path.normpath(case_dir / p) + os.sep))]
+    for e in case.get("evil", []):
         path = Path(e) if os.path.isabs(e) else work / e
         try:
             if path.exists() and not str(path.resolve()).startswith(str((work / "results")
@@ -156,6 +177,8 @@ def _outside(case_dir: Path, before: set[str], evil: list[str]) -> list[str]:
                 new.append(str(path))
         except OSError:
             pass
+    after = snapshot(work, case.get("kept", []))
+    new += [f"changed: {name}" for name in after if after[name] != kept_before[name]]
     return new
 
 
@@ -168,10 +191,11 @@ def run_cases(cases: list[dict], work: Path, fmus: Path, timeout: float, tally, 
     start = time.monotonic()
     for k, case in enumerate(cases):
         case_dir = work / case["id"]
-        from tests.support.fuzz.scenes import write_case
+        from tests.support.fuzz.scenes import snapshot, write_case
         write_case({**case, "files": {f"work/{n}": d for n, d in case["files"].items()}},
                    case_dir)
         before = {str(p.relative_to(case_dir)) for p in case_dir.rglob("*")}
+        kept_before = snapshot(case_dir / "work", case.get("kept", []))
         argv = ["run", case["scene"], "--fmus", str(fmus), "--no-progress", *case.get("args", [])]
         if w is None or not w.alive():
             w = Worker()
@@ -190,9 +214,9 @@ def run_cases(cases: list[dict], work: Path, fmus: Path, timeout: float, tally, 
             w.retire()  # pythonfmu 0.7.0's error path damaged this interpreter: a fresh worker
             w = None
         checks = []
-        if _nonfinite(case_dir):
+        if _nonfinite(case_dir, {case_dir / "work" / k for k in case.get("kept", [])}):
             checks.append("nonfinite")
-        if _outside(case_dir, before, case.get("evil", [])):
+        if _outside(case_dir, before, case, kept_before):
             checks.append("outside")
         tally[case["family"]][outcome] += 1
         for c in checks:
@@ -212,28 +236,18 @@ def run_cases(cases: list[dict], work: Path, fmus: Path, timeout: float, tally, 
 
 # -- Ctrl-C ----------------------------------------------------------------------------------------
 def ctrl_c_campaign(n: int, fmus: Path, work: Path, seed: int) -> dict:
-    from tests.support.fuzz.scenes import ROTOR
-    rng = random.Random(seed)
-    scene = work / "ctrl_c.toml"
-    # about 60 s of wall time on this 2-core machine (1000 s simulated at 1 ms steps)
-    scene.write_text(ROTOR.replace("stop_time = 0.05", "stop_time = 1000.0")
-                     .replace('name = "rotor"', 'name = "ctrl_c"'))
+    """n Ctrl-Cs at random moments of crankfmu's imports, run and exit handlers, in turn
+    (tests/support/fuzz/ctrl_c.py): how many were clean, per phase."""
+    from tests.support.fuzz.ctrl_c import campaign
+    folder = work / "ctrl_c"
+    folder.mkdir(exist_ok=True)
     results = collections.Counter()
-    for i in range(n):
-        out = work / f"ctrl_c_{i}.csv"
-        proc = subprocess.Popen([sys.executable, "-m", "crankfmu", "run", str(scene), "--fmus",
-                                 str(fmus), "--out", str(out), "--no-progress"], cwd=work,
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        time.sleep(rng.uniform(5.0, 60.0))  # after the 2-4 s of loading: within the run
-        finished = proc.poll() is not None
-        proc.send_signal(signal.SIGINT)
-        _, stderr = proc.communicate(timeout=120)
-        partial = out.is_file() and out.stat().st_size > 0
-        results["finished before the signal"] += finished
-        results[f"status {proc.returncode}"] += 1
-        results["partial CSV"] += partial
-        results["crash"] += proc.returncode < 0 or "Segmentation" in stderr
-        results["traceback"] += "Traceback" in stderr
+    for t in campaign(n, seed, folder, fmus, ROOT):
+        results[f"{t['phase']} {'clean' if t['clean'] else 'NOT clean'}"] += 1
+        results["clean"] += t["clean"]
+        if not t["clean"]:
+            print(f"  ctrl-c in {t['phase']} after {t['delay']:.3f} s: status {t['status']}: "
+                  f"{t['stderr'][-300:]}", flush=True)
     return dict(results)
 
 
@@ -246,6 +260,8 @@ def main() -> int:
     ap.add_argument("--set", dest="sets", default="all",
                     help="'all' (every parameter x 6 values), a number (a seeded sample), or 0")
     ap.add_argument("--timeout", type=float, default=60.0)
+    ap.add_argument("--out-cases", type=int, default=160,
+                    help="hostile output folders (tests/support/fuzz/outputs.py)")
     ap.add_argument("--ctrl-c", type=int, default=0)
     ap.add_argument("--work", type=Path, help="scratch folder (default: a new temp folder)")
     ap.add_argument("--fmus", type=Path, help="built FMUs (default: build all into --work)")
@@ -278,6 +294,9 @@ def main() -> int:
         (work / "rotor.toml").write_text(ROTOR)
         base = export_ssp(load_scene(work / "rotor.toml"), work / "rotor.ssp", fmus).read_bytes()
         groups.append(("ssp", ssp_cases(args.seed, args.ssp, base)))
+    if args.out_cases:
+        from tests.support.fuzz.outputs import output_cases
+        groups.append(("out", output_cases(args.seed, args.out_cases)))
     if args.sets != "0":
         cases = override_cases(fmus, models=args.models.split(",") if args.models else None)
         if args.sets != "all":
@@ -311,6 +330,8 @@ def main() -> int:
         shutil.rmtree(work, ignore_errors=True)
     bad = sum(tally[f][c] for f in tally for c in ("traceback", "crash", "hang", "nonfinite",
                                                     "outside"))
+    if ctrl and ctrl.get("clean", 0) < args.ctrl_c:
+        bad += 1
     return 1 if bad else 0
 
 

@@ -38,14 +38,14 @@ def package_with_the_example(tmp: Path) -> Path:
 def run_example(package: Path, tmp: Path, h: float) -> tuple[np.ndarray, np.ndarray]:
     """A run of the example scene at step h in a fresh interpreter on the package copy (its
     FMUs are built into tmp/fmus by the first run and reused by the next)."""
-    out = tmp / f"run_{h:g}.csv"
+    folder = tmp / f"run_{h:g}"  # --out names the output folder: <scene name>.csv in it
     env = dict(os.environ, PYTHONPATH=str(package.parent))
     done = subprocess.run([sys.executable, "-m", "crankfmu", "run",
                            str(EXAMPLES / "servo_flywheel.toml"), "--step", repr(h),
-                           "--fmus", str(tmp / "fmus"), "--out", str(out), "--no-progress"],
+                           "--fmus", str(tmp / "fmus"), "--out", str(folder), "--no-progress"],
                           capture_output=True, text=True, env=env, timeout=300)
     assert done.returncode == 0, done.stderr[-3000:]
-    data = np.genfromtxt(out, delimiter=",", names=True)
+    data = np.genfromtxt(folder / "servo_flywheel.csv", delimiter=",", names=True)
     return data["time"], data["flywheelflange_w"]
 
 

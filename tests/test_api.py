@@ -54,15 +54,15 @@ def test_simulate_writes_with_out_and_fmpy_reads_it(tmp_path, fmu_dir):
 
     import crankfmu
     scene = crankfmu.load_scene(SERVO)
-    result = crankfmu.simulate(scene, stop_time=0.05, step=2e-3, out=tmp_path / "r.csv",
+    result = crankfmu.simulate(scene, stop_time=0.05, step=2e-3, out=tmp_path,
                                fmu_dir=fmu_dir, inputs={"motor.u": [[0, 0], [0.05, 220]]},
                                parameters={"master.extrapolation": 1})
     assert scene.stop_time == 3.0 and "motor.u" in scene.inputs  # the caller's scene unchanged
     assert scene.inputs["motor.u"].values == [220.0]
-    back = read_csv(tmp_path / "r.csv")
+    back = read_csv(tmp_path / "servo_press.csv")  # out is the folder: <scene name>.csv
     assert back.dtype.names == result.values.dtype.names
     assert np.array_equal(back["press.w_crank"], result.values["press.w_crank"])
-    side = json.loads((tmp_path / "r.json").read_text())
+    side = json.loads((tmp_path / "servo_press.json").read_text())
     assert side["units"] == result.units and side["master"]["extrapolation"] == 1
     assert side["master"]["step"] == 2e-3
 
@@ -129,10 +129,10 @@ def test_coinciding_curves_share_one_legend_entry():
 def test_run_plot_draws_the_steady_state_with_the_reference_beside(tmp_path, fmu_dir):
     from crankfmu.cli import main
     scene = str(SERVO)
-    assert main(["-q", "reference", scene, "--stop-time", "0.8", "--out",
-                 str(tmp_path / "servo_press_reference.csv"), "--rtol", "1e-8"]) == 0
+    assert main(["-q", "reference", scene, "--stop-time", "0.8", "--out", str(tmp_path),
+                 "--rtol", "1e-8"]) == 0  # tmp_path/servo_press_reference.csv
     assert main(["-q", "run", scene, "--stop-time", "0.8", "--fmus", str(fmu_dir), "--out",
-                 str(tmp_path / "servo_press.csv"), "--plot"]) == 0
+                 str(tmp_path), "--plot"]) == 0  # tmp_path/servo_press.csv, .json, .png
     assert (tmp_path / "servo_press.png").stat().st_size > 10_000
     from crankfmu.cosim.runner import _reference_beside
     from crankfmu.cosim.results import Recorder
@@ -157,7 +157,11 @@ def test_compare_accuracy_and_sweep_write_only_into_out(tmp_path, monkeypatch, f
     assert acc.outcomes[0].ok and acc.csv is None
     table = crankfmu.sweep(SERVO, ["motor.J_flywheel=0,0.1"], stop_time=0.7, jobs=1,
                            fmu_dir=fmu_dir, progress=False)
-    assert len(table) == 2 and table.csv is None and table.rows[1]["status"] == "completed"
+    assert len(table) == 2 and table.csv is None
+    # 0.5 to 0.7 s holds no whole revolution: those figures are missing, and the row says why
+    assert table.rows[1]["status"] == "figures missing"
+    assert table.rows[1]["reason"].startswith("cycle_time, energy_per_stroke: no whole crank "
+                                              "revolution between from_time = 0.5 s")
     assert list(tmp_path.iterdir()) == []
     crankfmu.accuracy(SERVO, out=tmp_path / "acc", stop_time=0.05, algorithms=["jacobi"],
                       extrapolations=[0], steps=[2e-3], fmu_dir=fmu_dir, reference_rtol=1e-8)

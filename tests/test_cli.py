@@ -17,8 +17,8 @@ def crankfmu(*args, cwd=ROOT):
 
 
 def test_run_writes_csv_sidecar_and_plot(tmp_path, fmu_dir):
-    out = tmp_path / "sp.csv"
-    done = crankfmu("run", SCENARIOS / "servo_press.toml", "--fmus", fmu_dir, "--out", out,
+    out = tmp_path / "servo_press.csv"  # --out names the folder; the file is <scene name>.csv
+    done = crankfmu("run", SCENARIOS / "servo_press.toml", "--fmus", fmu_dir, "--out", tmp_path,
                     "--stop-time", 0.5, "--step", 2e-3, "--set", "press.F_max=2e4", "--plot",
                     "--no-progress")
     assert done.returncode == 0, done.stderr
@@ -36,7 +36,7 @@ def test_run_writes_csv_sidecar_and_plot(tmp_path, fmu_dir):
 
 def test_errors_exit_2_with_the_reason(tmp_path, fmu_dir):
     done = crankfmu("run", SCENARIOS / "servo_press.toml", "--fmus", fmu_dir, "--out",
-                    tmp_path / "x.csv", "--set", "press.l=0.01", "--no-progress")
+                    tmp_path, "--set", "press.l=0.01", "--no-progress")
     assert done.returncode == 2
     assert "parameter l = 0.01 is not allowed" in done.stderr
     done = crankfmu("run", tmp_path / "missing.toml")

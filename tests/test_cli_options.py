@@ -35,10 +35,11 @@ def _reads(source: str, dest: str) -> bool:
 
 def test_every_option_is_used_by_its_command():
     """Walks the parsers: for each option of each command, its handler (with the shared helper
-    load_with_options when the handler calls it, and main for the global options) reads it."""
+    load_with_options when the handler calls it, and run_command for the global options)
+    reads it."""
     from crankfmu import cli
     parser = cli.build_parser()
-    main_source = inspect.getsource(cli.main)
+    main_source = inspect.getsource(cli.run_command)
     for action in parser._actions:
         if action.dest not in ("help", "version", "command") and \
                 not isinstance(action, argparse._SubParsersAction):
@@ -79,9 +80,9 @@ def test_run_options_meaning_nothing_elsewhere_are_gone():
 def test_set_on_the_command_line(tmp_path, fmu_dir, capsys):
     """A parameter, a constant input and a master key, through `crankfmu run --set`."""
     from crankfmu.cli import main
-    out = tmp_path / "r.csv"
+    out = tmp_path / "servo_press.csv"
     assert main(["-q", "run", str(SCENARIOS / "servo_press.toml"), "--stop-time", "0.02",
-                 "--fmus", str(fmu_dir), "--out", str(out),
+                 "--fmus", str(fmu_dir), "--out", str(tmp_path),
                  "--set", "press.F_max=6e4", "--set", "motor.u=200",
                  "--set", "master.step=2e-3", "--set", "master.extrapolation=1"]) == 0
     side = json.loads(out.with_suffix(".json").read_text())
@@ -89,7 +90,7 @@ def test_set_on_the_command_line(tmp_path, fmu_dir, capsys):
     assert "u" not in side["components"]["motor"]["parameters"]
     assert side["master"]["step"] == 2e-3 and side["master"]["extrapolation"] == 1
     assert side["rows"] == 11
-    assert main(["run", str(SCENARIOS / "servo_press.toml"), "--out", str(tmp_path / "x.csv"),
+    assert main(["run", str(SCENARIOS / "servo_press.toml"), "--out", str(tmp_path / "x"),
                  "--set", "master.step=-1"]) == 2
     assert "must be > 0" in capsys.readouterr().err
 
@@ -137,9 +138,9 @@ def test_verbosity_and_the_build_message(tmp_path, capsys):
     from crankfmu.cli import main
     fmus = tmp_path / "fmus"
     assert main(["run", str(SCENARIOS / "servo_press.toml"), "--stop-time", "0.01", "--fmus",
-                 str(fmus), "--out", str(tmp_path / "a.csv"), "--no-progress"]) == 0
+                 str(fmus), "--out", str(tmp_path / "a"), "--no-progress"]) == 0
     err = capsys.readouterr().err
     assert f"building {fmus / 'DcServoMotor.fmu'} (FMU missing) from " in err
     assert main(["-q", "run", str(SCENARIOS / "servo_press.toml"), "--stop-time", "0.01",
-                 "--fmus", str(tmp_path / "fmus2"), "--out", str(tmp_path / "b.csv")]) == 0
+                 "--fmus", str(tmp_path / "fmus2"), "--out", str(tmp_path / "b")]) == 0
     assert "building" not in capsys.readouterr().err

@@ -36,7 +36,12 @@ def test_accuracy_on_a_pool_equals_serial(fmu_dir, tmp_path):
         name = f"runs/{oa.setting.label}.csv"
         assert (tmp_path / "j1" / name).read_bytes() == (tmp_path / "j2" / name).read_bytes()
         side = json.loads((tmp_path / "j2" / name).with_suffix(".json").read_text())
-        assert side["status"] == "completed" and side["communication_steps"] == oa.communication_steps
+        serial = json.loads((tmp_path / "j1" / name).with_suffix(".json").read_text())
+        # completed, or unreliable (Jacobi at 2 ms over the 0.05 s start-up: port energy
+        # mismatch 0.14, crankfmu.cosim.trust): the same on both, with the same CSV
+        assert side["status"] in ("completed", "unreliable")
+        assert side["status"] == serial["status"] and side["csv"] == serial["csv"]
+        assert side["communication_steps"] == oa.communication_steps
     assert results[1].orders == results[2].orders
 
 

@@ -1,10 +1,12 @@
 """A quick seeded subset of the fuzz campaign (scripts/fuzz.py runs the full one): one scene
-file of each of the 56 kinds, the SSP archives of the cheap kinds, and a sample of `--set`
-values, each through `crankfmu run` in this process. Every case must end with exit 0 or a clear
-error (exit 2), write no NaN or inf, and write nothing outside its results folder."""
+file of each of the 56 kinds, the SSP archives of the cheap kinds, a sample of `--set` values
+and one hostile output folder of each kind, each through `crankfmu run` in this process. Every
+case must end with exit 0 or a clear error (exit 2), write no NaN or inf, write nothing
+outside its output folder and leave the files it keeps as they were."""
 from __future__ import annotations
 
 import math
+import os
 import random
 import time
 from pathlib import Path
@@ -13,7 +15,8 @@ import pytest
 
 from crankfmu.cli import main
 from tests.support.fuzz.overrides import override_cases
-from tests.support.fuzz.scenes import KINDS, ROTOR, TEXT_KINDS, scene_cases, write_case
+from tests.support.fuzz.outputs import output_cases
+from tests.support.fuzz.scenes import KINDS, ROTOR, TEXT_KINDS, scene_cases, snapshot, write_case
 from tests.support.fuzz.ssp import ssp_cases
 
 SEED = 16
@@ -28,16 +31,24 @@ def fuzz_fmus(fmu_dir) -> Path:
 def run_case(case: dict, folder: Path, fmus: Path, monkeypatch, capsys) -> tuple[int, str]:
     work = folder / case["id"]
     write_case({**case, "files": {f"work/{n}": d for n, d in case["files"].items()}}, work)
+    kept = snapshot(work / "work", case.get("kept", []))
+    before = {p for p in work.rglob("*")}
     monkeypatch.chdir(work / "work")
     status = main(["run", case["scene"], "--fmus", str(fmus), "--no-progress",
                    *case.get("args", [])])
     err = capsys.readouterr().err
     assert status in (0, 2), (case["kind"], status, err)
     assert status == 0 or err.startswith("error: "), (case["kind"], err)
+    out = os.path.normpath(work / "work" / case.get("out", "results")) + os.sep
+    for path in set(work.rglob("*")) - before:  # nowhere but the output folder (and the
+        path = os.path.normpath(path) + os.sep   # folders made on the way to it)
+        assert path.startswith(out) or out.startswith(path), (case["kind"], path)
     for csv in (work / "work").rglob("*.csv"):
+        if not csv.is_file() or csv.is_symlink():
+            continue  # a FIFO or a link the case made (and that must be kept)
         for line in csv.read_text().splitlines()[1:]:
             assert all(math.isfinite(float(x)) for x in line.split(",")), (case["kind"], csv)
-        assert csv.parent.name == "results", (case["kind"], csv)  # nowhere else
+    assert snapshot(work / "work", case.get("kept", [])) == kept, case["kind"]
     for evil in case.get("evil", []):
         path = Path(evil) if evil.startswith("/") else work / "work" / evil
         assert not path.exists() or path.resolve().parent == (work / "work" / "results").resolve()
@@ -70,3 +81,15 @@ def test_a_sample_of_set_values(tmp_path, fuzz_fmus, monkeypatch, capsys):
     sample = random.Random(SEED).sample(cases, 12)
     for case in sample:
         run_case(case, tmp_path, fuzz_fmus, monkeypatch, capsys)
+
+
+def test_hostile_output_folders(tmp_path, fuzz_fmus, monkeypatch, capsys):
+    """One case of each kind of tests/support/fuzz/outputs.py (issue #27): a FIFO, a link, a
+    file or a folder where the output folder or a result goes, a name too long, a folder out
+    of reach: exit 0 or a clear error, files only in the output folder, the kept ones kept."""
+    cases = output_cases(SEED, 16)
+    statuses = {c["kind"]: run_case(c, tmp_path, fuzz_fmus, monkeypatch, capsys)[0]
+                for c in cases}
+    assert len(statuses) == 16
+    assert statuses["out_is_a_fifo"] == statuses["member_is_a_fifo"] == 2
+    assert statuses["out_deep"] == statuses["out_existing_with_other_files"] == 0

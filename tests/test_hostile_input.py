@@ -9,6 +9,7 @@ rewrite and are not here.
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 import signal
@@ -364,9 +365,9 @@ def test_ctrl_c_stops_writes_partial_results_and_exits_130(tmp_path, rotors, del
     """Before: Ctrl-C reported "FMU call failed ... KeyboardInterrupt()" and the process then
     died of a segmentation fault in 3 of 5 tries."""
     path = rotor_scene(tmp_path, stop=1000.0, step=1e-3)
-    out = tmp_path / "out.csv"
+    out = tmp_path / "out" / "rotor.csv"  # --out names the output folder
     proc = subprocess.Popen([sys.executable, "-m", "crankfmu", "run", str(path), "--fmus",
-                             str(rotors), "--out", str(out), "--no-progress"], cwd=ROOT,
+                             str(rotors), "--out", str(out.parent), "--no-progress"], cwd=ROOT,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     time.sleep(delay)
     proc.send_signal(signal.SIGINT)
@@ -546,3 +547,206 @@ def test_a_step_that_cannot_finish_fails_in_bounded_time(tmp_path, fmu_dir, assi
     with pytest.raises(RunError, match=words):
         run_scene(scene, RunOptions(out=tmp_path / "out.csv", fmu_dir=fmu_dir, progress=False))
     assert time.perf_counter() - start < 60.0
+
+
+# -- issue #27: sizes, silent figures, trust, the API's argument types -----------------------------
+def _no_run(monkeypatch):
+    """Any run or FMU build fails the test: the refusal must come first."""
+    def computed(*args, **kwargs):
+        raise AssertionError("computed before the input was refused")
+    import crankfmu.studies.compare
+    import crankfmu.studies.executor
+    from crankfmu.cosim import runner
+    monkeypatch.setattr(runner, "load_fmus", computed)
+    monkeypatch.setattr(crankfmu.studies.executor, "prepare_tasks", computed)
+    monkeypatch.setattr(crankfmu.studies.compare, "run_for_comparison", computed)
+
+
+def test_a_huge_sweep_grid_is_refused_before_it_is_made(tmp_path):
+    """Before: `--vary press.F_max=0:1:100000000` reached 17.5 GB in 64 s before any run started.
+    Here the process may take 1 GiB of address space beyond what it has at start-up: the grid
+    (a linspace of 1e8 floats, then a scene copy per point) must be refused before it is made,
+    at once and with the limit named."""
+    code = ("import resource, sys, runpy\n"
+            "from crankfmu.cli import parse\n"  # the imports first, then the limit
+            "parse(['sweep', 'x', '--vary', 'a.b=1'])\n"
+            "import numpy, scipy.stats, fmpy  # what a sweep imports\n"
+            "soft = int(open('/proc/self/statm').read().split()[0]) * 4096 + (1 << 30)\n"
+            "resource.setrlimit(resource.RLIMIT_AS, (soft, soft))\n"
+            "from crankfmu.cli import main\n"
+            "sys.exit(main(sys.argv[1:]))\n")
+    start = time.monotonic()
+    done = subprocess.run([sys.executable, "-c", code, "sweep", str(SCENARIOS / "servo_press.toml"),
+                           "--vary", "press.F_max=0:1:100000000", "--out", str(tmp_path / "s")],
+                          cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2, done.stderr[-2000:]
+    assert "--vary press.F_max: N = 100000000 points; allowed 1 to 10000" in done.stderr
+    assert time.monotonic() - start < 60 and not (tmp_path / "s").exists()
+
+
+@pytest.mark.parametrize("vary, extra, words", [
+    (["press.F_max=1e4:2e4:200", "press.m5=1:2:60"], [],
+     "--vary: the grid has 200 x 60 points, more than the limit of 10000 runs"),
+    (["press.F_max=0:1"], ["--samples", "20000"], "--samples: 20000 points; allowed 1 to 10000"),
+    (["press.F_max=nan,6e4"], [], "every value must be a finite number, got nan, 60000.0"),
+    (["press.F_max=0:inf:3"], [], "every value must be a finite number, got 0.0, inf"),
+    (["press.F_max=6e4,7e4"], ["--stop-time", "0.3"],
+     "[analysis].from_time: 0.5 s is not before the stop time 0.3 s: the runs would end before "
+     "the analysis window starts"),
+    (["press.F_max=6e4,7e4"], ["--from-time", "nan"], "--from-time: must be a finite number"),
+], ids=["grid", "samples", "nan", "inf_range", "window", "from_time_nan"])
+def test_sweep_sizes_and_values_are_checked_before_any_run(tmp_path, capsys, monkeypatch, vary,
+                                                           extra, words):
+    """Before: nan was a grid value, the grid had no limit, and a stop time before the
+    analysis window gave rows of NaN figures marked "completed" (exit 0)."""
+    _no_run(monkeypatch)
+    argv = ["sweep", str(SCENARIOS / "servo_press.toml"), "--out", str(tmp_path / "s"),
+            "--no-progress", *extra]
+    for v in vary:
+        argv += ["--vary", v]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert words in err, err
+
+
+def test_a_run_too_large_to_record_is_refused_before_it_starts(tmp_path, capsys, monkeypatch):
+    """Rows x columns of a run are bounded (crankfmu.errors.MAX_RECORD_BYTES), checked before
+    the FMUs load: raising --max-steps no longer lets a run fill the memory with rows."""
+    _no_run(monkeypatch)
+    assert main(["run", str(SCENARIOS / "servo_press.toml"), "--stop-time", "1e5",
+                 "--max-steps", "200000000", "--out", str(tmp_path), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "[record]: up to 100000002 rows x 7 columns (5.22 GiB of recorded values)" in err
+    assert "more than the limit of 1 GiB" in err
+
+
+def test_compare_refuses_a_stop_time_before_the_analysis_window(tmp_path, capsys, monkeypatch):
+    _no_run(monkeypatch)
+    assert main(["compare", str(SCENARIOS / "servo_press.toml"),
+                 str(SCENARIOS / "conventional_press.toml"), "--stop-time", "0.2", "--out",
+                 str(tmp_path), "--no-progress", "--jobs", "1"]) == 2
+    assert "0.5 s is not before the stop time 0.2 s" in capsys.readouterr().err
+
+
+def test_figures_of_an_empty_window_say_why_instead_of_a_numpy_error():
+    """Before: a window holding no sample (from_time after the run's end: sweep and compare now
+    refuse that before running) raised numpy's "zero-size array to reduction operation
+    maximum", and a window without a whole revolution gave NaN figures without a word."""
+    from crankfmu.studies.compare import Series, metrics
+    t = np.linspace(0.0, 1.0, 11)
+    values = {"crank_angle": 3 * t, "crank_speed": np.full_like(t, 3.0),
+              "drive_torque": np.ones_like(t), "drive_power": np.ones_like(t)}
+    for from_time, points in ((1.5, 0), (0.95, 1)):  # 0 points: numpy's error before
+        empty = metrics(Series("run", t, values, from_time))
+        assert set(empty["missing"]) == {"cycle_time", "mean_crank_speed", "delta",
+                                         "peak_drive_torque", "energy_per_stroke"}
+        assert f"holds {points} recorded point(s), fewer than 2" in empty["missing"]["delta"]
+        assert all(math.isnan(empty[k]) for k in empty["missing"])
+    short = metrics(Series("run", t, values, 0.5))  # 1.5 rad: no whole revolution
+    assert short["mean_crank_speed"] == 3.0 and set(short["missing"]) == {"cycle_time",
+                                                                         "energy_per_stroke"}
+    assert short["missing"]["cycle_time"].startswith("no whole crank revolution")
+
+
+def test_a_diverged_run_is_marked_unreliable_with_cause_and_remedy(tmp_path, fmu_dir, capsys):
+    """Before: Jacobi at 16 ms on the servo press ended "completed", exit 0, while its own
+    estimate said 1.05 and the port energy mismatch 23 %, and nothing on the terminal said so.
+    (scripts/large_steps.py: its true error is 0.78.)"""
+    assert main(["run", str(SCENARIOS / "servo_press.toml"), "--algorithm", "jacobi", "--step",
+                 "0.016", "--fmus", str(fmu_dir), "--out", str(tmp_path), "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    warning = [line for line in err.splitlines() if line.startswith("warning: ")]
+    assert len(warning) == 1, err
+    assert "servo_press: the result is unreliable: its estimated error 1.05 (105%) exceeds " \
+           "0.1; the port energy mismatch at motor -> press is 0.227 (23%)" in warning[0]
+    assert "Remedy: use a smaller step (--step), another master" in warning[0]
+    meta = json.loads((tmp_path / "servo_press.json").read_text())
+    assert meta["status"] == meta["outcome"] == "unreliable" and len(meta["unreliable"]) == 2
+    assert "--target" in meta["remedy"]
+
+
+def test_the_api_marks_and_warns_an_unreliable_run(fmu_dir):
+    import crankfmu
+    from crankfmu.cosim.trust import UnreliableResultWarning
+    with pytest.warns(UnreliableResultWarning, match="unreliable: its estimated error"):
+        result = crankfmu.simulate(SCENARIOS / "servo_press.toml", algorithm="jacobi",
+                                   step=0.016, fmu_dir=fmu_dir)
+    assert result.status == "unreliable" and len(result.unreliable) == 2
+    ok = crankfmu.simulate(SCENARIOS / "servo_press.toml", stop_time=0.3, fmu_dir=fmu_dir)
+    assert ok.status == "completed" and ok.unreliable == []
+
+
+def test_trust_limits():
+    """The rule of crankfmu.cosim.trust at its limits (0.1 and 0.1)."""
+    from crankfmu.cosim.estimate import EVENTS_DIFFER, Estimate
+    from crankfmu.cosim.trust import causes
+
+    def port(rel):
+        return {"ports": [{"driver": "m", "receiver": "p", "relative_mismatch": rel}]}
+    assert causes(Estimate(error=0.1), port(0.1)) == []
+    assert causes(None, {}) == [] and causes(Estimate(reason="no metric"), port(None)) == []
+    assert causes(Estimate(error=0.11), port(0.0))[0].startswith("its estimated error 0.11")
+    assert causes(None, port(0.11))[0].startswith("the port energy mismatch at m -> p is 0.11")
+    assert "counts other events" in causes(Estimate(reason=f"{EVENTS_DIFFER}: 3 vs 4"), {})[0]
+
+
+def test_sweep_rows_say_why_they_have_no_figures_or_are_unreliable(tmp_path, fmu_dir):
+    """A run that completed without all its figures is "figures missing", one whose port energy
+    says it is not to be trusted "unreliable", each with the reason (no NaN marked completed)."""
+    from crankfmu.studies.sweep import sweep
+    table = sweep(SCENARIOS / "servo_press.toml", ["press.F_max=6e4,7e4"], tmp_path / "s",
+                  overrides=["master.algorithm=jacobi", "master.step=0.016"], jobs=1,
+                  fmu_dir=fmu_dir, progress=False, plot=False)
+    for row in table.rows:
+        assert row["status"] == "unreliable" and "port energy mismatch" in row["reason"]
+        assert math.isfinite(row["delta"])  # the figures are there, marked
+    short = sweep(SCENARIOS / "servo_press.toml", ["press.F_max=6e4"], tmp_path / "t",
+                  stop_time=0.6, jobs=1, fmu_dir=fmu_dir, progress=False, plot=False)
+    assert short.rows[0]["status"] == "figures missing"
+    assert short.rows[0]["reason"] == ("cycle_time, energy_per_stroke: no whole crank revolution "
+                                       "between from_time = 0.5 s and the run's end at 0.6 s")
+
+
+@pytest.mark.parametrize("call, words", [
+    (lambda c: c.simulate(None), "scene: a path to a scene file (.toml or .ssp; a str or a "
+                                 "pathlib.Path) or a Scene from crankfmu.load_scene, got None"),
+    (lambda c: c.load_scene(None), "scene: a path to a scene file (.toml or .ssp) (a str or a "
+                                   "pathlib.Path), got None"),
+    (lambda c: c.simulate(SCENARIOS / "servo_press.toml", parameters=["press.F_max", 6e4]),
+     'parameters: a dict from "component.name" to its value'),
+    (lambda c: c.reference(SCENARIOS / "servo_press.toml", inputs=[1]),
+     'inputs: a dict from "component.name" to its value'),
+    (lambda c: c.simulate(SCENARIOS / "servo_press.toml", fmu_dir=3), "fmu_dir: the folder of "
+                                                                      "built FMUs (a str or"),
+    (lambda c: c.simulate(SCENARIOS / "servo_press.toml", out=b"x"), "out: the output folder"),
+    (lambda c: c.compare(SCENARIOS / "servo_press.toml", None), "scene_b: a path"),
+    (lambda c: c.sweep(SCENARIOS / "servo_press.toml", 5), 'vary: a "COMP.PARAM=V1,V2,..." '
+                                                           "string or a list of them, got int 5"),
+    (lambda c: c.sweep(SCENARIOS / "servo_press.toml", "a=1:2:3"),
+     "vary a=1:2:3: must look like COMP.PARAM="),
+    (lambda c: c.sweep(SCENARIOS / "servo_press.toml", "press.F_max=nan"),
+     "vary press.F_max: every value must be a finite number"),
+    (lambda c: c.accuracy(SCENARIOS / "servo_press.toml", stepz=[1e-3]),
+     "accuracy: unknown argument stepz"),
+], ids=["scene_none", "load_none", "parameters_list", "inputs_list", "fmu_dir_int", "out_bytes",
+        "compare_none", "vary_int", "vary_string", "vary_nan", "accuracy_keyword"])
+def test_api_arguments_of_the_wrong_type_are_named_in_api_terms(call, words):
+    """Before: TypeError or AttributeError tracebacks (a list's missing .items, str / str), and
+    crankfmu.sweep(scene, "a=1:2:3") read the string character by character and named the
+    command line's --vary."""
+    import crankfmu
+    with pytest.raises(CrankfmuError) as err:
+        call(crankfmu)
+    assert words in str(err.value) and "--" not in str(err.value), str(err.value)
+
+
+def test_api_takes_str_paths(tmp_path, fmu_dir):
+    """Before: fmu_dir="..." raised TypeError (str / str); a str scene, fmu_dir and out work."""
+    import crankfmu
+    result = crankfmu.simulate(str(SCENARIOS / "servo_press.toml"), stop_time=0.01,
+                               fmu_dir=str(fmu_dir), out=str(tmp_path), estimate=False)
+    assert result.files["csv"] == tmp_path / "servo_press.csv" and result.status == "completed"
+    table = crankfmu.sweep(str(SCENARIOS / "servo_press.toml"), "press.F_max=6e4",
+                           str(tmp_path / "s"), stop_time=0.6, jobs=1, fmu_dir=str(fmu_dir),
+                           progress=False, plot=False)
+    assert len(table) == 1 and table.csv == tmp_path / "s" / "sweep.csv"

@@ -83,13 +83,13 @@ def test_example_master_options_are_checked_where_given(tmp_path, rotor_fmus, ex
         parse_scene("x.toml", scene({"algorithm": "jacobi", "tolerance": 1e-6}))
     path = scene_file(tmp_path, {"algorithm": EXAMPLE}, OSCILLATOR,
                       0.05, None)
-    out = tmp_path / "cli.csv"
+    out = tmp_path / "cli"  # the output folder
     assert main(["run", str(path), "--fmus", str(rotor_fmus), "--out", str(out), "--sweeps",
                  "0", "--no-progress"]) == 2
     assert "--sweeps: must be an integer from 1 to 50" in capsys.readouterr().err
     assert main(["run", str(path), "--fmus", str(rotor_fmus), "--out", str(out), "--sweeps",
                  "3", "--no-progress"]) == 0
-    side = json.loads(out.with_suffix(".json").read_text())
+    side = json.loads((out / f"{path.stem}.json").read_text())
     assert side["master"]["sweeps"] == 3 and "tolerance" not in side["master"]
     assert side["master_statistics"]["passes"] == 3 * 50  # 50 steps of 1 ms
 

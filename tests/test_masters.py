@@ -228,7 +228,7 @@ def test_cli_run_prints_coupling_error(tmp_path, rotor_fmus, capsys):
 
     path = scene_file(tmp_path, {"algorithm": "gauss-seidel", "step": 1e-2}, OSCILLATOR, 0.2,
                       None)
-    code = main(["run", str(path), "--fmus", str(rotor_fmus), "--out", str(tmp_path / "o.csv"),
+    code = main(["run", str(path), "--fmus", str(rotor_fmus), "--out", str(tmp_path / "o"),
                  "--algorithm", "adaptive", "--extrapolation", "1", "--tolerance", "1e-3",
                  "--no-progress"])
     out = capsys.readouterr().out

@@ -240,8 +240,8 @@ def test_unknown_names_and_unit_mismatches_name_the_key(tmp_path):
 def test_reference_command_writes_the_run_layout(tmp_path, capsys):
     from crankfmu.cli import main
 
-    out = tmp_path / "ref.csv"
-    assert main(["reference", str(SCENARIOS / "servo_press.toml"), "--out", str(out),
+    out = tmp_path / "servo_press_reference.csv"  # --out DIR: <scene name>_reference.csv
+    assert main(["reference", str(SCENARIOS / "servo_press.toml"), "--out", str(tmp_path),
                  "--stop-time", "0.1", "--set", "press.F_max=40000", "--no-progress"]) == 0
     header = out.read_text().split("\n", 1)[0]
     scene = load_scene(SCENARIOS / "servo_press.toml")
@@ -253,5 +253,5 @@ def test_reference_command_writes_the_run_layout(tmp_path, capsys):
     bad = tmp_path / "bad.toml"
     bad.write_text((SCENARIOS / "servo_press.toml").read_text().replace(
         'fmu = "StephensonPress"', 'fmu = "press.fmu"'))
-    assert main(["reference", str(bad), "--out", str(tmp_path / "x.csv")]) == 2
+    assert main(["reference", str(bad), "--out", str(tmp_path / "x")]) == 2
     assert "composes catalog physics models only" in capsys.readouterr().err

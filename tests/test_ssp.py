@@ -115,8 +115,8 @@ def test_time_table_input_goes_to_the_annotation(scene, fmu_dir, tmp_path):
 
 def test_cli_export_matches_the_function(ssp, fmu_dir, tmp_path, capsys):
     from crankfmu.cli import main
-    out = tmp_path / "cli.ssp"
-    assert main(["export-ssp", str(SCENARIOS / "servo_press.toml"), "--out", str(out),
+    out = tmp_path / "servo_press.ssp"  # --out DIR: <scene name>.ssp
+    assert main(["export-ssp", str(SCENARIOS / "servo_press.toml"), "--out", str(tmp_path),
                  "--fmus", str(fmu_dir), "--stop-time", str(STOP),
                  "--set", "motor.J_rotor=0.08"]) == 0
     assert out.read_bytes() == ssp.read_bytes()
@@ -147,8 +147,8 @@ def test_run_ssp_is_bit_identical_to_run_toml(scene, ssp, fmu_dir, tmp_path):
     from crankfmu.cli import main
     toml_csv = run_scene(copy.deepcopy(scene), RunOptions(out=tmp_path / "toml.csv",
                                                           fmu_dir=fmu_dir, progress=False)).csv
-    assert main(["run", str(ssp), "--out", str(tmp_path / "ssp.csv"), "--no-progress"]) == 0
-    rows = _csv_rows(tmp_path / "ssp.csv")
+    assert main(["run", str(ssp), "--out", str(tmp_path / "ssp"), "--no-progress"]) == 0
+    rows = _csv_rows(tmp_path / "ssp" / f"{scene.name}.csv")
     assert rows == _csv_rows(toml_csv)  # same text: same doubles, same record list and times
     assert len(rows) == 1 + round(STOP / scene.master.step) + 1
     assert rows[0][1:] == scene.record

@@ -3,8 +3,10 @@ table from one process, a local pool of 2 and a Dask LocalCluster of 2 worker pr
 127.0.0.1, also when a worker process is killed mid-sweep.
 
 The physics does not matter here, so the scene is one Rotor (exact matrix-exponential steps)
-spun up by a constant torque against a damper: its angle grows, so the [analysis] figures
-(strokes, mean speed, delta, ...) are all defined. The failed-run test uses the servo press with
+spun up by a constant torque against a damper: its angle grows by more than a revolution after
+from_time at every grid point (30 N.m: the slowest point, J = 0.9, d = 1.0, turns 8.6 rad in
+the 0.5 s window of stop = 1.0), so the [analysis] figures (strokes, mean speed, delta, ...)
+are all defined: a row without them would say "figures missing". The failed-run test uses the servo press with
 a rod shorter than the crank (press.l < press.r), which the press refuses.
 """
 from __future__ import annotations
@@ -51,7 +53,7 @@ step = 1e-3
 fmu = "Rotor"
 parameters = {{ J = 0.5, d = 0.4, w0 = 6.0 }}
 [inputs]
-"r.flange_tau" = 2.0
+"r.flange_tau" = 30.0
 [record]
 variables = ["r.flange_phi", "r.flange_w"]
 interval = 1e-2
@@ -112,7 +114,10 @@ def test_failed_run_is_a_row_and_the_sweep_resumes(tmp_path, fmu_dir, one_worker
               progress=False)
     table = sweep(ROOT / "scenarios/servo_press.toml", ["press.l=0.25,0.04,0.3"], out, **kw)
     status = [r["status"] for r in table.rows]
-    assert status == ["completed", "refused", "completed"]
+    # 0.05 s is no whole revolution: those figures are missing, and the rows say so
+    assert status == ["figures missing", "refused", "figures missing"]
+    assert table.rows[0]["reason"] == ("cycle_time, energy_per_stroke: no whole crank revolution "
+                                       "between from_time = 0 s and the run's end at 0.05 s")
     bad = table.rows[1]
     assert "l = 0.04 is not allowed" in bad["reason"] and "\n" not in bad["reason"]
     assert math.isnan(bad["mean_crank_speed"])
@@ -215,7 +220,10 @@ def test_hybrid_scene_reports_its_event_figures(tmp_path, hybrid_fmus, one_worke
                   progress=False, plot=False)
     for name in ("drive.E_brake_b", "drive.E_brake_h", "drive.n_events"):
         assert name in table.columns
-    assert [r["status"] for r in table.rows] == ["completed", "completed"]
+    # 0.6 s holds no whole revolution of the press: its cycle figures are missing, saying why
+    assert [r["status"] for r in table.rows] == ["figures missing"] * 2
+    assert all(r["reason"].startswith("cycle_time, energy_per_stroke: no whole crank")
+               for r in table.rows)
     E = table.column("drive.E_brake_b")
     assert np.all(E > 0) and E[1] != E[0]
     assert np.all(table.column("drive.n_events") >= 1)

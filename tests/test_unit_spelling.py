@@ -50,11 +50,11 @@ def test_units_in_sidecars_plots_and_terminal_output(tmp_path, fmu_dir):
     from crankfmu.studies.compare import Series, format_table, compare_table, overlay_figure
 
     run = crankfmu.simulate(SCENARIOS / "servo_press.toml", stop_time=0.05,
-                            out=tmp_path / "run.csv", fmu_dir=fmu_dir)
+                            out=tmp_path, fmu_dir=fmu_dir)  # out: the folder
     ref = crankfmu.reference(SCENARIOS / "servo_press.toml", stop_time=0.05, rtol=1e-6,
-                             out=tmp_path / "ref.csv")
+                             out=tmp_path)
     found = []
-    for sidecar in ("run.json", "ref.json"):
+    for sidecar in ("servo_press.json", "servo_press_reference.json"):
         units = json.loads((tmp_path / sidecar).read_text())["units"]
         assert set(units) == set(run.units)
         found += units.values()

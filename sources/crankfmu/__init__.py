@@ -14,17 +14,11 @@ _SHADOWED = ("reference",)  # the function crankfmu.reference over the subpackag
 
 
 def sweep(scene, vary, out=None, **options):
-    """Parameter sweep of a scene; returns the table (crankfmu.studies.sweep.sweep). Without
-    `out` the sweep runs in a temporary folder that is removed (the table's paths are None)."""
-    from .studies.sweep import sweep as _sweep
-    if out is not None:
-        return _sweep(scene, vary, out, **options)
-    import tempfile
-    from pathlib import Path
-    with tempfile.TemporaryDirectory(prefix="crankfmu-sweep-") as tmp:
-        table = _sweep(scene, vary, Path(tmp), **options)
-    table.csv = table.png = None
-    return table
+    """Parameter sweep of a scene; returns the table (crankfmu.api.sweep: `vary` one
+    "COMP.PARAM=..." string or a list of them; without `out` the sweep runs in a temporary
+    folder that is removed, and the table's paths are None)."""
+    from .api import sweep as _sweep
+    return _sweep(scene, vary, out, **options)
 
 
 def reference(scene, **options):

@@ -8,21 +8,32 @@
     fig = result.plot()                 # a matplotlib Figure; the backend is left alone
     df = result.to_pandas()             # with pandas installed
 
-Nothing is written unless `out` is given (a CSV path for simulate and reference, a folder for
-accuracy, compare and sweep). `scene` is a path to a scene file (.toml, .ssp) or a loaded
-scene (`load_scene`); a loaded scene is copied, never changed. `parameters` and `inputs` map
-"comp.name" to values: a parameter, a constant or a table [[t, v], ...] for an unconnected
-input; "master.step" and the other [master] keys go in `parameters` too (as with --set).
+Nothing is written unless `out` is given: the output folder (a str or a path), where each
+function writes its files under names it chooses, as the command line's --out DIR does
+(simulate: <scene name>.csv, .json, .png; reference: <scene name>_reference.csv, ...), checked
+before anything runs. `scene` is a path to a scene file (.toml, .ssp; a str or a path) or a
+loaded scene (`load_scene`); a loaded scene is copied, never changed. `parameters` and
+`inputs` map "comp.name" to values: a parameter, a constant or a table [[t, v], ...] for an
+unconnected input; "master.step" and the other [master] keys go in `parameters` too (as with
+--set). An argument of the wrong type raises crankfmu.errors.OptionError naming it and what it
+takes. A run whose own figures say it is not to be trusted has `Result.status` "unreliable"
+(crankfmu.cosim.trust) and warns (UnreliableResultWarning) with the cause and the remedy.
 """
 from __future__ import annotations
 
+import os
 import tempfile
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Result", "accuracy", "compare", "load_scene", "reference", "simulate"]
+from .errors import OptionError
+
+__all__ = ["Result", "accuracy", "compare", "load_scene", "reference", "simulate", "sweep"]
+API_NAMES = {"vary": "vary", "samples": "samples", "stop_time": "stop_time",
+             "from_time": "from_time", "out": "out"}  # how errors name the arguments
 
 
 @dataclass
@@ -43,6 +54,17 @@ class Result:
         """The run's estimated global error in the scene's accuracy metric
         (crankfmu.cosim.estimate; metadata["error_estimate"] says how and, if None, why not)."""
         return (self.metadata.get("error_estimate") or {}).get("estimated_error")
+
+    @property
+    def status(self) -> str:
+        """"completed", or "unreliable" when the run's own estimate or port energy says it is
+        not to be trusted (the causes in `unreliable`; crankfmu.cosim.trust)."""
+        return self.metadata.get("outcome", "completed")
+
+    @property
+    def unreliable(self) -> list[str]:
+        """Why the run is not to be trusted (empty for a run that is)."""
+        return list(self.metadata.get("unreliable", []))
 
     @property
     def names(self) -> list[str]:
@@ -104,7 +126,54 @@ def _result(recorder, metadata: dict, files: dict, title: str, statistics=None,
 def load_scene(scene):
     """A scene file (.toml or .ssp) loaded and checked (crankfmu.system.load_scene)."""
     from .system.load import load_scene as _load
-    return _load(scene)
+    return _load(_path(scene, "scene", "a path to a scene file (.toml or .ssp)", required=True))
+
+
+def _path(value, name: str, what: str, required: bool = False) -> Path | None:
+    """`value` as a Path (None stays None unless `required`); OptionError naming `name` for
+    another type."""
+    if value is None and not required:
+        return None
+    if _is_path(value):
+        return Path(value)
+    raise OptionError(f"{name}: {what} (a str or a pathlib.Path), got {_show(value)}")
+
+
+def _is_path(value) -> bool:
+    return isinstance(value, (str, os.PathLike)) and not isinstance(value, bytes) and \
+        bool(os.fspath(value))
+
+
+def _show(value) -> str:
+    if value is None:
+        return "None"
+    text = repr(value)
+    return f"{type(value).__name__} {text if len(text) <= 60 else text[:57] + '...'}"
+
+
+def _scene(scene, name: str = "scene"):
+    """A Scene as given, or the path to its file; OptionError for anything else."""
+    from .system.scene import Scene
+    if isinstance(scene, Scene):
+        return scene
+    if _is_path(scene):
+        return Path(scene)
+    raise OptionError(f"{name}: a path to a scene file (.toml or .ssp; a str or a "
+                      f"pathlib.Path) or a Scene from crankfmu.load_scene, got {_show(scene)}")
+
+
+def _mapping(value, name: str, example: str):
+    """`value` if None or a mapping with str keys; OptionError for anything else."""
+    if value is None or (isinstance(value, Mapping) and all(isinstance(k, str) for k in value)):
+        return value
+    raise OptionError(f"{name}: a dict from \"component.name\" to its value (e.g. {example}), "
+                      f"got {_show(value)}")
+
+
+def _jobs(value, name: str = "jobs") -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise OptionError(f"{name}: a whole number of processes >= 1, got {_show(value)}")
+    return value
 
 
 def prepare(scene, *, stop_time=None, step=None, algorithm=None, parameters=None, inputs=None,
@@ -114,16 +183,19 @@ def prepare(scene, *, stop_time=None, step=None, algorithm=None, parameters=None
     the masters' own options as keyword arguments (extrapolation=2, tolerance=1e-4, min_step=...,
     as each master declares them: crankfmu.masters.MASTERS[name].options)."""
     from .system.load import prepare_scene
-    return prepare_scene(scene, stop_time=stop_time, step=step, algorithm=algorithm,
-                         parameters=parameters, inputs=inputs, **master_options)
+    return prepare_scene(_scene(scene), stop_time=stop_time, step=step, algorithm=algorithm,
+                         parameters=_mapping(parameters, "parameters", '{"press.F_max": 65e3}'),
+                         inputs=_mapping(inputs, "inputs", '{"motor.u": [[0, 200], [1, 220]]}'),
+                         **master_options)
 
 
 def simulate(scene, *, stop_time=None, step=None, algorithm=None, parameters=None,
              inputs=None, out=None, progress=False, plot=False, fmu_dir=None, log=False,
              estimate=True, target=None, jobs=1, **master_options) -> Result:
     """Co-simulate the scene with its master (crankfmu.cosim.runner.run_scene) and return the
-    recorded values. `out`: a CSV path to write (the JSON sidecar beside it, and with
-    `plot=True` a PNG); nothing is written without it. `fmu_dir`: the built FMUs (default:
+    recorded values. `out`: the output folder (<scene name>.csv, its JSON sidecar
+    <scene name>.json and with `plot=True` <scene name>.png); nothing is written without it.
+    `fmu_dir`: the built FMUs (default:
     fmus/ beside the scene's scenarios/ folder, else the package's build folder; stale or
     missing FMUs are built there, never into the working folder). `master_options`: the
     chosen master's own options (extrapolation=2, tolerance=1e-4, ...; see `prepare`).
@@ -132,22 +204,40 @@ def simulate(scene, *, stop_time=None, step=None, algorithm=None, parameters=Non
     master, extrapolation and step are chosen from the estimate (crankfmu.cosim.target);
     raises crankfmu.cosim.target.TargetNotMet saying why when no setting meets it. `jobs=2`:
     the companion runs execute in a worker process beside the run (crankfmu.cosim.companions;
-    a spawned interpreter, so a script that calls this needs `if __name__ == "__main__":`)."""
+    a spawned interpreter, so a script that calls this needs `if __name__ == "__main__":`).
+    A run marked unreliable (Result.status) warns with UnreliableResultWarning."""
+    from .cosim.results import check_run_set
     from .cosim.runner import RunOptions, run_scene
     scene = prepare(scene, stop_time=stop_time, step=step, algorithm=algorithm,
                     parameters=parameters, inputs=inputs, **master_options)
+    fmu_dir = _path(fmu_dir, "fmu_dir", "the folder of built FMUs")
+    jobs = _jobs(jobs)
     if target is not None:
         set_value(scene, "master.target", target, "target")
+    folder = _path(out, "out", "the output folder")
+    csv = check_run_set(folder / f"{scene.name}.csv", "out") if folder is not None else None
     if scene.master.target is not None:
-        return _simulate_target(scene, out, plot, fmu_dir, jobs)
-    result = run_scene(scene, RunOptions(out=Path(out) if out is not None else None,
-                                         plot=plot, fmu_dir=fmu_dir, progress=progress,
-                                         verbose_log=log, estimate=estimate, jobs=jobs))
-    m = scene.master
-    return _result(result.recorder, result.metadata,
-                   {"csv": result.csv, "sidecar": result.sidecar, "png": result.png},
-                   f"{scene.name}: {m.algorithm}, step {m.step:g} s", result.statistics,
-                   result.coupling_error, scene)
+        result = _simulate_target(scene, csv, plot, fmu_dir, jobs)
+    else:
+        run = run_scene(scene, RunOptions(out=csv, plot=plot, fmu_dir=fmu_dir,
+                                          progress=progress, verbose_log=log,
+                                          estimate=estimate, jobs=jobs))
+        m = scene.master
+        result = _result(run.recorder, run.metadata,
+                         {"csv": run.csv, "sidecar": run.sidecar, "png": run.png},
+                         f"{scene.name}: {m.algorithm}, step {m.step:g} s", run.statistics,
+                         run.coupling_error, scene)
+    _warn_if_unreliable(scene, result)
+    return result
+
+
+def _warn_if_unreliable(scene, result: Result) -> None:
+    import warnings
+
+    from .cosim.trust import UnreliableResultWarning, warning_line
+    line = warning_line(scene.name, result.metadata)
+    if line:
+        warnings.warn(UnreliableResultWarning(line), stacklevel=3)
 
 
 def set_value(scene, ref, value, key):
@@ -155,13 +245,10 @@ def set_value(scene, ref, value, key):
     _set(scene, ref, value, key)
 
 
-def _simulate_target(scene, out, plot, fmu_dir, jobs) -> Result:
+def _simulate_target(scene, csv, plot, fmu_dir, jobs) -> Result:
     from .cosim.target import search, write_chosen
     result, report = search(scene, scene.master.target, fmu_dir, jobs)
-    result.metadata["error_estimate"] = report.estimate.to_json()
-    result.metadata["target"] = report.to_json()
-    if out is not None:
-        write_chosen(scene, result, report, Path(out), plot)
+    write_chosen(scene, result, report, csv, plot)
     m = result.metadata["master"]
     return _result(result.recorder, result.metadata,
                    {"csv": result.csv, "sidecar": result.sidecar, "png": result.png},
@@ -172,15 +259,19 @@ def _simulate_target(scene, out, plot, fmu_dir, jobs) -> Result:
 def reference(scene, *, stop_time=None, parameters=None, inputs=None, rtol=None, method=None,
               out=None, progress=False) -> Result:
     """The scene's monolithic reference (its physics models as one ODE, scipy), recorded on
-    the run's grid. `out`: a CSV path to write (sidecar beside it); nothing without it."""
+    the run's grid. `out`: the output folder (<scene name>_reference.csv and its sidecar);
+    nothing is written without it."""
+    from .cosim.results import check_run_set
     from .reference import DEFAULT_RTOL, solve_reference, write_reference
     scene = prepare(scene, stop_time=stop_time, parameters=parameters, inputs=inputs)
+    folder = _path(out, "out", "the output folder")
+    csv = check_run_set(folder / f"{scene.name}_reference.csv", "out") if folder else None
     result = solve_reference(scene, rtol=DEFAULT_RTOL if rtol is None else rtol,
                              method=method, progress=progress)
     metadata = {"kind": "monolithic reference", "method": result.method, "rtol": result.rtol,
                 "rhs_calls": result.rhs_calls, "wall_seconds": result.wall_seconds}
-    if out is not None:
-        write_reference(scene, Path(out), result)
+    if csv is not None:
+        write_reference(scene, csv, result)
     return _result(result.recorder, metadata, {"csv": result.csv, "sidecar": result.sidecar},
                    f"{scene.name}: monolithic reference, {result.method} rtol {result.rtol:g}",
                    {}, {}, scene)
@@ -195,13 +286,23 @@ def accuracy(scene, *, out=None, stop_time=None, parameters=None, inputs=None, *
     scheduler, executor). `out`: the folder to write
     (accuracy.csv, work_precision.png, the runs); without it they go to a temporary folder
     that is removed, and the result's paths are None."""
+    import dataclasses
+
     from .studies.accuracy import AccuracyOptions, run_accuracy
+    known = {f.name for f in dataclasses.fields(AccuracyOptions)} - {"out_dir", "out_option"}
+    unknown = sorted(set(options) - known)
+    if unknown:
+        raise OptionError(f"accuracy: unknown argument {', '.join(unknown)}; arguments: out, "
+                          f"stop_time, parameters, inputs, {', '.join(sorted(known))}")
     scene = prepare(scene, stop_time=stop_time, parameters=parameters, inputs=inputs)
     options.setdefault("progress", False)
-    if out is not None:
-        return run_accuracy(scene, AccuracyOptions(out_dir=Path(out), **options))
+    options["fmu_dir"] = _path(options.get("fmu_dir"), "fmu_dir", "the folder of built FMUs")
+    folder = _path(out, "out", "the output folder")
+    if folder is not None:
+        return run_accuracy(scene, AccuracyOptions(out_dir=folder, out_option="out", **options))
     with tempfile.TemporaryDirectory(prefix="crankfmu-accuracy-") as tmp:
-        result = run_accuracy(scene, AccuracyOptions(out_dir=Path(tmp), **options))
+        result = run_accuracy(scene, AccuracyOptions(out_dir=Path(tmp), out_option="out",
+                                                     **options))
     result.reference_csv = result.csv = result.png = None
     return result
 
@@ -217,13 +318,40 @@ def compare(scene_a, scene_b, *, stop_time=None, out=None, fmu_dir=None, jobs=1,
     from .studies.compare import compare_scenes
     from .cosim.runner import RunOptions
     from .studies.executor import make_executor
-    scenes = [prepare(s, stop_time=stop_time) for s in (scene_a, scene_b)]
-    options = RunOptions(fmu_dir=fmu_dir, progress=progress)
+    scenes = [prepare(_scene(s, name), stop_time=stop_time)
+              for s, name in ((scene_a, "scene_a"), (scene_b, "scene_b"))]
+    options = RunOptions(fmu_dir=_path(fmu_dir, "fmu_dir", "the folder of built FMUs"),
+                         progress=progress)
+    jobs = _jobs(jobs)
+    folder = _path(out, "out", "the output folder")
     serial = jobs == 1 and scheduler is None  # one after the other in this process
     with contextlib.nullcontext() if serial else make_executor(jobs, scheduler) as executor:
-        if out is not None:
-            return compare_scenes(scenes[0], scenes[1], Path(out), options, executor)
+        if folder is not None:
+            return compare_scenes(scenes[0], scenes[1], folder, options, executor, "out",
+                                  "stop_time")
         with tempfile.TemporaryDirectory(prefix="crankfmu-compare-") as tmp:
-            result = compare_scenes(scenes[0], scenes[1], Path(tmp), options, executor)
+            result = compare_scenes(scenes[0], scenes[1], Path(tmp), options, executor, "out",
+                                    "stop_time")
     result["csv"] = result["png"] = None
     return result
+
+
+def sweep(scene, vary, out=None, **options):
+    """Parameter sweep of a scene; returns the table (crankfmu.studies.sweep.sweep). `vary`:
+    one "COMP.PARAM=V1,V2,..." or "COMP.PARAM=START:STOP:N" string, or a list of them (or of
+    crankfmu.studies.sweep.Vary). `out`: the output folder; without it the sweep runs in a
+    temporary folder that is removed (the table's paths are None)."""
+    from .studies.sweep import Vary, sweep as _sweep
+    scene = _scene(scene)
+    vary = [vary] if isinstance(vary, (str, Vary)) else vary
+    if not isinstance(vary, (list, tuple)) or not all(isinstance(v, (str, Vary)) for v in vary):
+        raise OptionError(f"vary: a \"COMP.PARAM=V1,V2,...\" string or a list of them, got "
+                          f"{_show(vary)}")
+    options["fmu_dir"] = _path(options.get("fmu_dir"), "fmu_dir", "the folder of built FMUs")
+    folder = _path(out, "out", "the output folder")
+    if folder is not None:
+        return _sweep(scene, vary, folder, names=API_NAMES, **options)
+    with tempfile.TemporaryDirectory(prefix="crankfmu-sweep-") as tmp:
+        table = _sweep(scene, vary, Path(tmp), names=API_NAMES, **options)
+    table.csv = table.png = None
+    return table

@@ -55,8 +55,9 @@ def add_fmu_option(p: argparse.ArgumentParser) -> None:
 
 def add_output_options(p: argparse.ArgumentParser, out_help: str, plot_help: str | None = None,
                        progress: bool = True) -> None:
-    """--out (always with a default under results/), --plot, --no-progress."""
-    p.add_argument("--out", type=Path, help=out_help)
+    """--out DIR (always the output folder, with a default under results/: the command writes
+    its files there under names it chooses, and nothing outside it), --plot, --no-progress."""
+    p.add_argument("--out", type=Path, metavar="DIR", help=out_help)
     if plot_help:
         p.add_argument("--plot", action="store_true", help=plot_help)
     if progress:
@@ -68,8 +69,8 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
     add_scene_options(p)
     add_master_options(p)
     add_fmu_option(p)
-    add_output_options(p, "CSV to write (default results/<scene name>.csv); the JSON sidecar "
-                          "and the PNG go beside it",
+    add_output_options(p, "output folder (default results/): <scene name>.csv, its JSON "
+                          "sidecar <scene name>.json and with --plot <scene name>.png",
                        "also write a PNG of the recorded variables")
     p.add_argument("--log", action="store_true", help="print the FMUs' log messages")
     p.add_argument("--target", type=float, metavar="TOL",
@@ -134,14 +135,15 @@ def _master_options_from(args, scene) -> None:
 
 
 def cmd_run(args) -> int:
+    from .cosim.results import check_run_set
     from .cosim.runner import RunOptions, run_scene
     from .system.scene import _number
 
     scene = load_with_options(args)
-    out = args.out or Path("results") / f"{scene.name}.csv"
     if args.target is not None:
         scene.master.target = _number(scene.path, "--target", args.target, positive=True,
                                       maximum=1.0)
+    out = check_run_set((args.out or Path("results")) / f"{scene.name}.csv")  # before running
     if scene.master.target is not None:
         return _run_target(scene, out, args)
     result = run_scene(scene, RunOptions(out=out, plot=args.plot, fmu_dir=args.fmus,
@@ -199,6 +201,10 @@ def _print_run(scene, result, estimate=None) -> None:
     if estimate is not None:
         print("  " + format_estimate(estimate))
     print(f"wrote {result.csv}, {result.sidecar}" + (f", {result.png}" if result.png else ""))
+    from .cosim.trust import warning_line
+    warning = warning_line(scene.name, result.metadata)
+    if warning:
+        print(f"warning: {warning}", file=sys.stderr)
 
 
 def cmd_build(args) -> int:
@@ -288,13 +294,23 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     """Exit status 0, 2 for every crankfmu error (`crankfmu.errors.CrankfmuError`: a bad scene,
     option or archive, a failed run), 130 for Ctrl-C; no traceback for anything a user can do."""
-    from .errors import CrankfmuError
     try:
-        parser = build_parser()
-        args = parser.parse_args(argv)
+        args = parse(argv)
     except KeyboardInterrupt:  # Ctrl-C while the commands are imported
         print("error: interrupted (Ctrl-C)", file=sys.stderr)
         return 130
+    return run_command(args)
+
+
+def parse(argv=None):
+    """The command line parsed (every command's module imported: most of start-up)."""
+    from . import errors  # noqa: F401 - imported here with the rest (numpy): run_command needs it
+    return build_parser().parse_args(argv)
+
+
+def run_command(args) -> int:
+    """Run the parsed command: main's exit statuses."""
+    from .errors import CrankfmuError
     setup_logging(args.verbose - args.quiet)
     if args.quiet and hasattr(args, "no_progress"):
         args.no_progress = True

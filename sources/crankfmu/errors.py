@@ -16,6 +16,10 @@ MAX_SCENE_FILE_BYTES = 4 << 20  # a scene file (TOML) read into memory
 MAX_NAME_LENGTH = 100           # a scene name becomes a file name: results/<name>.csv
 MAX_TIME = 1e12                 # |start_time|, |stop_time| [s]: beyond this a step is lost in
                                 # the time's rounding
+MAX_STUDY_RUNS = 10_000         # runs of one study (a sweep's grid, an accuracy sweep's
+                                # settings): each is a scene copy and a task in memory
+MAX_RECORD_BYTES = 1 << 30      # a run's recorded values in memory (rows x columns x 8 bytes);
+                                # its CSV is about 2.5 times that
 
 
 class InterruptedRun(CrankfmuError):

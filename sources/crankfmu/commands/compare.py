@@ -14,28 +14,32 @@ def register(sub) -> None:
     p.add_argument("--stop-time", type=float, help="end of both runs [s]")
     from ..cli import add_fmu_option, add_output_options
     add_fmu_option(p)
-    add_output_options(p, "folder for compare.csv, compare.png and both runs' CSVs (default "
-                          "results/<A name>_vs_<B name>)")
+    add_output_options(p, "output folder: compare.csv, compare.png and both runs' CSVs and "
+                          "sidecars (default results/<A name>_vs_<B name>)")
     from .sweep import add_executor_options
     add_executor_options(p, "two runs")
     p.set_defaults(func=run_compare)
 
 
 def run_compare(args) -> int:
-    from ..studies.compare import compare_scenes
     from ..cosim.runner import RunOptions
+    from ..errors import MAX_TIME
+    from ..studies.compare import check_compare_outputs, compare_scenes
+    from ..studies.executor import make_executor
     from ..system.load import load_scene
-    from ..system.scene import SceneError
+    from ..system.scene import SceneError, _number, check_run_size
 
     scenes = [load_scene(args.scene_a), load_scene(args.scene_b)]
     for sc in scenes:
         if args.stop_time is not None:
-            if args.stop_time <= sc.start_time:
+            sc.stop_time = _number(sc.path, "--stop-time", args.stop_time, minimum=-MAX_TIME,
+                                   maximum=MAX_TIME)
+            if sc.stop_time <= sc.start_time:
                 raise SceneError(sc.path, "--stop-time", f"must exceed start_time = {sc.start_time}")
-            sc.stop_time = args.stop_time
-    from ..studies.executor import make_executor
+            check_run_size(sc)
     options = RunOptions(fmu_dir=args.fmus, progress=False if args.no_progress else None)
-    out = args.out or Path("results") / f"{scenes[0].name}_vs_{scenes[1].name}"
+    out = check_compare_outputs(scenes[0], scenes[1], args.out or Path("results") /
+                                f"{scenes[0].name}_vs_{scenes[1].name}")  # before any run
     with make_executor(args.jobs, args.scheduler) as executor:
         result = compare_scenes(scenes[0], scenes[1], out, options, executor)
     print(result["text"])

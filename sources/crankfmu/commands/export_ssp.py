@@ -1,4 +1,5 @@
-"""`crankfmu export-ssp SCENE.toml [--out X.ssp]`: the scene as an SSP 1.0 archive."""
+"""`crankfmu export-ssp SCENE.toml [--out DIR]`: the scene as an SSP 1.0 archive,
+DIR/<scene name>.ssp."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -14,17 +15,18 @@ def register(sub) -> None:
     add_scene_options(p)
     add_master_options(p)
     add_fmu_option(p)
-    add_output_options(p, "archive to write (default results/<scene name>.ssp)", progress=False)
+    add_output_options(p, "output folder (default results/): <scene name>.ssp", progress=False)
     p.set_defaults(func=run_export)
 
 
 def run_export(args) -> int:
     from ..cli import load_with_options
+    from ..outputs import check_files
     from ..system.wiring import default_fmu_dir
     from ..system.ssp_export import describe_fmus, export_ssp, lossy_parts
 
     scene = load_with_options(args)
-    out = args.out or Path("results") / f"{scene.name}.ssp"
+    out, = check_files(args.out or Path("results"), [f"{scene.name}.ssp"])  # before building
     fmu_dir = args.fmus or default_fmu_dir(scene)
     export_ssp(scene, out, fmu_dir)
     print(f"wrote {out} ({out.stat().st_size / 1024:.0f} KiB): {len(scene.components)} "

@@ -13,8 +13,9 @@ def register(sub) -> None:
     add_scene_options(p)
     add_step_option(p, "record grid: the run's communication step [s] ([master].step), so "
                        "reference and run CSVs line up row by row")
-    add_output_options(p, "CSV to write (default results/<scene name>_reference.csv); the "
-                          "JSON sidecar and the PNG go beside it",
+    add_output_options(p, "output folder (default results/): <scene name>_reference.csv, its "
+                          "JSON sidecar <scene name>_reference.json and with --plot "
+                          "<scene name>_reference.png",
                        "also write a PNG of the recorded variables")
     p.add_argument("--rtol", type=float, default=DEFAULT_RTOL,
                    help=f"relative tolerance of the solver (default {DEFAULT_RTOL:g}; absolute "
@@ -27,23 +28,20 @@ def register(sub) -> None:
 
 def run_reference_command(args) -> int:
     from ..cli import load_with_options
-    from ..cosim.results import plot
+    from ..cosim.results import check_run_set, figure_png, run_figure
     from ..errors import OptionError
     from ..reference import solve_reference, write_reference
 
     scene = load_with_options(args)
     if args.rtol <= 0:
         raise OptionError(f"--rtol must be > 0, got {args.rtol}")
-    out = args.out or Path("results") / f"{scene.name}_reference.csv"
+    out = check_run_set((args.out or Path("results")) / f"{scene.name}_reference.csv")
     result = solve_reference(scene, rtol=args.rtol, method=args.method,
                              progress=False if args.no_progress else None)
-    write_reference(scene, out, result)
+    png = figure_png(run_figure(result.recorder, f"{scene.name}: monolithic reference, "
+                                f"{result.method} rtol {result.rtol:g}")) if args.plot else None
+    write_reference(scene, out, result, png)
     print(f"{scene.name} reference: {result.method} at rtol {result.rtol:g}, "
           f"{result.rhs_calls} right-hand side calls, {result.wall_seconds:.2f} s wall")
-    written = [result.csv, result.sidecar]
-    if args.plot:
-        written.append(out.with_suffix(".png"))
-        plot(written[-1], result.recorder, f"{scene.name}: monolithic reference, "
-                                           f"{result.method} rtol {result.rtol:g}")
-    print("wrote " + ", ".join(str(w) for w in written))
+    print("wrote " + ", ".join(str(w) for w in (result.csv, result.sidecar, result.png) if w))
     return 0

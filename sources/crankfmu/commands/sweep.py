@@ -27,9 +27,9 @@ def register(sub) -> None:
     p.add_argument("--samples", type=int,
                    help="Latin hypercube of N points over the --vary ranges instead of the grid")
     p.add_argument("--seed", type=int, default=0, help="seed of the Latin hypercube (default 0)")
-    p.add_argument("--out", type=Path,
-                   help="folder: sweep.csv, sweep.json, sweep.png (default results/<scene "
-                        "name>_sweep; an interrupted sweep resumes)")
+    p.add_argument("--out", type=Path, metavar="DIR",
+                   help="output folder: sweep.csv, sweep.json, sweep.png (default "
+                        "results/<scene name>_sweep; an interrupted sweep resumes)")
     p.add_argument("--from-time", type=float,
                    help="start of the analysis window [s] (default [analysis].from_time)")
     add_fmu_option(p)

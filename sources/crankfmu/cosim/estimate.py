@@ -35,6 +35,7 @@ from .metrics import Metric, MetricError, ReferenceSamples
 STEP_RATIO = 2.0          # run step / companion step (and the --target search's rungs)
 RATIO_TOLERANCE = 10.0    # variable-step master: run tolerance / companion tolerance
 ORDER_MIN, ORDER_MAX = 0.5, 5.0  # default clamp of an observed order (coarse_bounds narrows it)
+EVENTS_DIFFER = "event count differs between the run and its companion"  # a reason (no estimate)
 
 
 @dataclass
@@ -53,6 +54,11 @@ class Estimate:
     @property
     def ok(self) -> bool:
         return math.isfinite(self.error)
+
+    @property
+    def events_differ(self) -> bool:
+        """No estimate because the companion counts other events than the run."""
+        return self.reason.startswith(EVENTS_DIFFER)
 
     def to_json(self) -> dict:
         def num(x):
@@ -98,8 +104,7 @@ def difference(metric: Metric, a: tuple, b: tuple) -> tuple[float, str]:
             details = metric.event_details(np.asarray(t_c, dtype=float), cols_c, ref)
             reasons = [d.reason for d in details if d.reason]
             if reasons:
-                return math.inf, "event count differs between the run and its companion: " + \
-                    "; ".join(reasons)
+                return math.inf, f"{EVENTS_DIFFER}: " + "; ".join(reasons)
         return float(metric.error(np.asarray(t_c, dtype=float), cols_c, ref)), ""
     except MetricError as err:
         return math.nan, str(err)

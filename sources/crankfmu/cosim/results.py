@@ -1,15 +1,16 @@
 """Recording and writing results: CSV (fmpy.util.read_csv layout), JSON sidecar, PNG plot."""
 from __future__ import annotations
 
+import io
 import json
 import math
-import os
 import platform
-import tempfile
 from importlib import metadata
 from pathlib import Path
 
 import numpy as np
+
+from ..outputs import atomic_write, check_file, folder_lock, output_folder, remove_file
 
 
 class Recorder:
@@ -35,6 +36,33 @@ class Recorder:
         return self.rows[:, 1 + self.names.index(name)]
 
 
+def record_rows(scene) -> int:
+    """The most rows a run of `scene` records: a row every [record].interval (rounded to whole
+    steps for a fixed-step master, at least min_step apart for a variable-step one), the start
+    and the stop."""
+    from ..masters import MASTERS
+    m, span = scene.master, scene.stop_time - scene.start_time
+    interval = scene.record_interval or 0.0
+    if getattr(MASTERS.get(m.algorithm), "variable_step", False):
+        return math.ceil(span / max(interval, m.min_step)) + 2
+    steps = max(1, math.ceil(span / m.step - 1e-9))
+    return steps // max(1, round((interval or m.step) / m.step)) + 2
+
+
+def check_record_size(scene) -> None:
+    """The run's recorded values fit MAX_RECORD_BYTES (crankfmu.errors); checked before
+    anything is loaded or allocated. Raises SceneError saying how to record less."""
+    from ..errors import MAX_RECORD_BYTES, SceneError
+    rows, columns = record_rows(scene), len(scene.record) + 1
+    size = rows * columns * 8
+    if size > MAX_RECORD_BYTES:
+        raise SceneError(scene.path, "[record]", f"up to {rows} rows x {columns} columns "
+                         f"({size / 2**30:.3g} GiB of recorded values) from start_time "
+                         f"{scene.start_time:g} to stop_time {scene.stop_time:g} s, more than "
+                         f"the limit of {MAX_RECORD_BYTES / 2**30:g} GiB: record fewer "
+                         "variables, a longer [record].interval or a shorter run")
+
+
 def normalize_unit(unit: str | None) -> str:
     """A unit in FMI's spelling (the modelDescription's): "1" for a dimensionless value."""
     return unit or "1"
@@ -46,37 +74,13 @@ def column_units(recorder: Recorder) -> dict[str, str]:
                                                                  recorder.units)}}
 
 
-def atomic_write(path: Path, write) -> None:
-    """Write through a temporary file in the same folder, then rename it onto `path`: a reader
-    (or a crash) sees the old file or the new one, never a half-written one."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            write(f)
-        os.chmod(tmp, 0o666 & ~_umask())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-def write_csv(path: Path, recorder: Recorder) -> None:
+def write_csv(path: Path, recorder: Recorder) -> str:
+    """The CSV (atomic_write: a regular file, never half written); returns its sha256."""
     def write(f):
         f.write(",".join(["time"] + [f'"{n}"' for n in recorder.names]) + "\n")
         for row in recorder.rows:
             f.write(",".join(repr(float(v)) for v in row) + "\n")
-    atomic_write(path, write)
+    return atomic_write(path, write)
 
 
 def versions() -> dict:
@@ -272,17 +276,81 @@ def read_result_csv(path: Path) -> tuple[list[str], np.ndarray]:
     return [h.strip('"') for h in header[1:]], rows
 
 
-def plot(path: Path, recorder: Recorder, title: str, roles: dict | None = None,
-         reference=None) -> None:
-    """A PNG: the steady state (steady_figure) when `roles` name a recorded crank angle, speed
-    and drive torque, else one panel per recorded variable, with units, over time."""
+def run_figure(recorder: Recorder, title: str, roles: dict | None = None, reference=None):
+    """The steady state (steady_figure) when `roles` name a recorded crank angle, speed and
+    drive torque, else one panel per recorded variable, with units, over time."""
     if roles and all(roles.get(r) in recorder.names
                      for r in ("crank_angle", "crank_speed", "drive_torque")):
-        fig = steady_figure(recorder.names, recorder.units, recorder.rows, roles, title,
-                            reference)
-    else:
-        fig = figure(recorder.names, recorder.units, recorder.rows, title)
-    fig.savefig(path, dpi=110)
+        return steady_figure(recorder.names, recorder.units, recorder.rows, roles, title,
+                             reference)
+    return figure(recorder.names, recorder.units, recorder.rows, title)
+
+
+def plot(path: Path, recorder: Recorder, title: str, roles: dict | None = None,
+         reference=None) -> None:
+    """A PNG of run_figure, written as a regular file (save_figure)."""
+    save_figure(run_figure(recorder, title, roles, reference), path)
+
+
+def figure_png(fig, dpi: int = 110) -> bytes:
+    """The figure rendered as PNG bytes (rendered before any file is touched)."""
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=dpi)
+    return buffer.getvalue()
+
+
+def save_figure(fig, path: Path, dpi: int = 110) -> Path:
+    """The figure as a PNG at `path` through atomic_write (a regular file, never half written,
+    never replacing anything else)."""
+    data = figure_png(fig, dpi)
+    atomic_write(path, lambda f: f.write(data))
+    return Path(path)
+
+
+def run_set_paths(csv: Path) -> tuple[Path, Path, Path]:
+    """(CSV, JSON sidecar, PNG) of the run whose CSV is `csv`: one name, three suffixes."""
+    csv = Path(csv)
+    if csv.suffix != ".csv":  # the names of a set must differ (r.json as CSV once met its sidecar)
+        raise ValueError(f"a result CSV's name ends in .csv, got {csv.name}")
+    return csv, csv.with_suffix(".json"), csv.with_suffix(".png")
+
+
+def check_run_set(csv: Path, option: str = "--out") -> Path:
+    """Before a run: its output folder found or created and writable, and no name the run may
+    write (the set's three, and the failed run's `<name>.failed.csv` and `.json`) taken by
+    anything but a regular file (crankfmu.outputs). Raises OutputError naming `option`."""
+    csv, sidecar, png = run_set_paths(csv)
+    output_folder(csv.parent, option)
+    failed = failed_csv(csv)
+    for path in (csv, sidecar, png, failed, failed.with_suffix(".json")):
+        check_file(path, option)
+    return csv
+
+
+def failed_csv(csv: Path) -> Path:
+    """`<name>.failed.csv` beside `<name>.csv`: where a failed rerun keeps its rows, so the
+    good result of an earlier run is never replaced by a failed one."""
+    return csv.with_name(f"{csv.stem}.failed.csv")
+
+
+def write_run_set(csv: Path, recorder: Recorder, metadata: dict, png: bytes | None = None
+                  ) -> tuple[Path, Path, Path | None]:
+    """Write a run's CSV, its JSON sidecar (`metadata` plus "csv": file name, sha256 and row
+    count of the CSV written) and, given its bytes, its PNG, as one set: under an exclusive lock
+    on the folder, so another process writing the same names waits and the three files always
+    come from one run; a PNG of an earlier run beside the CSV is removed when this run draws
+    none (it would describe another CSV). The sidecar is written last. Returns the paths."""
+    csv, sidecar, png_path = run_set_paths(csv)
+    with folder_lock(csv.parent):
+        metadata["csv"] = {"file": csv.name, "sha256": write_csv(csv, recorder),
+                           "rows": recorder.count}
+        if png is not None:
+            atomic_write(png_path, lambda f: f.write(png))
+        else:
+            remove_file(png_path)
+        metadata["plot"] = png_path.name if png is not None else None
+        write_sidecar(sidecar, metadata)
+    return csv, sidecar, png_path if png is not None else None
 
 
 def structured(names, rows: np.ndarray) -> np.ndarray:

@@ -17,8 +17,9 @@ from ..system.scene import Scene, SceneError, check_run_size
 from ..fmu.instance import FmuInstance, LogCollector
 from ..masters import MASTERS, DivergenceError, OptionError, make_master
 from ..masters.inputs import split_at_edges, step_edges
-from .results import (Recorder, column_units, normalize_unit, plot, versions, write_csv,
-                      write_sidecar)
+from .results import (Recorder, check_record_size, check_run_set, column_units, failed_csv,
+                      figure_png, normalize_unit, run_figure, versions, write_run_set)
+from .trust import judge_result
 from ..system.wiring import (System, check_components, check_links, check_loops, check_physics,
                              default_fmu_dir, master_interface, resolve_fmu)
 
@@ -147,7 +148,7 @@ def partial_paths(out: Path) -> tuple[Path, Path]:
     sidecar = out.with_suffix(".json")
     if not out.exists() and not sidecar.exists():
         return out, sidecar
-    failed = out.with_name(f"{out.stem}.failed{out.suffix or '.csv'}")
+    failed = failed_csv(out)
     return failed, failed.with_suffix(".json")
 
 
@@ -179,10 +180,11 @@ def run_scene(scene: Scene, options: RunOptions | None = None) -> RunResult:
     and raises RunError (RunInterrupted for Ctrl-C)."""
     options = options or RunOptions()
     check_run_size(scene)
+    check_record_size(scene)
     if options.estimate:
         from .estimate import with_metric_record
         scene = with_metric_record(scene)
-    out = Path(options.out) if options.out is not None else None
+    out = check_run_set(Path(options.out)) if options.out is not None else None
     log = LogCollector(echo=options.verbose_log)
     fmu_dir = options.fmu_dir or default_fmu_dir(scene)
     companions = _companions(options)  # workers start while the FMUs load
@@ -233,18 +235,28 @@ def _prepare_and_run(scene, options, out, log, fmu_dir, companions) -> RunResult
         for _, companion in pending or ():
             companion.cancel()
         raise
-    if pending is not None:
-        _add_estimate(scene, fmu_dir, result, pending)
+    try:
+        if pending is not None:
+            _add_estimate(scene, fmu_dir, result, pending)
+    except BaseException as err:  # the run's own results are kept, without the estimate
+        result.metadata["error_estimate"] = {"estimated_error": None, "reason": "not "
+                                             f"finished: {type(err).__name__}"}
+        _write_result(scene, options, out, result, plot=False)
+        if isinstance(err, (KeyboardInterrupt, InterruptedRun)):
+            raise RunInterrupted("interrupted (Ctrl-C) while the error estimate's companion "
+                                 "runs ran; the run's results were written without an "
+                                 "estimate", result.csv) from None
+        raise
+    judge_result(scene, result)
+    _write_result(scene, options, out, result)
     return result
 
 
 def _add_estimate(scene: Scene, fmu_dir, result: RunResult, pending: list) -> None:
-    """Collect the companions, put the estimate in the result and its sidecar."""
+    """Collect the companions, put the estimate in the result's metadata."""
     from .estimate import recorder_series
     result.estimate = estimate_run(scene, recorder_series(result.recorder), fmu_dir, pending)
     result.metadata["error_estimate"] = result.estimate.to_json()
-    if result.sidecar is not None:
-        write_sidecar(result.sidecar, result.metadata)
 
 
 def _run(scene, options, out, log, fmus, system, master, recorder, readers, interrupt):
@@ -279,11 +291,6 @@ def _run(scene, options, out, log, fmus, system, master, recorder, readers, inte
         close_fmus(fmus)
     if interrupt.requested and not failure:
         failure, outcome = f"interrupted (Ctrl-C) at t = {master.time or t0:.6g} s", "interrupted"
-    if out is None:
-        csv = sidecar = None
-    else:
-        csv, sidecar = partial_paths(out) if failure else (out, out.with_suffix(".json"))
-        write_csv(csv, recorder)
     statistics = master.statistics()
     m = scene.master
     metadata = {
@@ -298,17 +305,31 @@ def _run(scene, options, out, log, fmus, system, master, recorder, readers, inte
         "communication_steps": step,
         "statistics": statistics, "master_statistics": master.master_statistics(),
         "coupling_error": master.coupling_error(), **options.extra_sidecar}
-    if sidecar is not None:
-        write_sidecar(sidecar, metadata)
+    result = RunResult(None, None, None, recorder, statistics, wall, step,
+                       master.master_statistics(), master.coupling_error(), metadata, cpu)
     if failure:
+        csv = None
+        if out is not None:
+            csv, result.sidecar, _ = write_run_set(partial_paths(out)[0], recorder, metadata)
         raise (RunInterrupted if outcome == "interrupted" else RunError)(failure, csv)
-    png = out.with_suffix(".png") if options.plot and out is not None else None
-    if png:
-        reference = _reference_beside(out, recorder)
-        plot(png, recorder, f"{scene.name}: {scene.master.algorithm}, step {h:g} s",
-             plot_roles(scene), reference)
-    return RunResult(out, sidecar, png, recorder, statistics, wall, step,
-                     master.master_statistics(), master.coupling_error(), metadata, cpu)
+    return result
+
+
+def _write_result(scene: Scene, options: RunOptions, out: Path | None, result: RunResult,
+                  plot: bool | None = None) -> None:
+    """The run's CSV, sidecar and (options.plot) PNG, written as one set (write_run_set)."""
+    if out is None:
+        return
+    png = None
+    if options.plot if plot is None else plot:
+        m = result.metadata["master"]
+        title = f"{scene.name}: {m['algorithm']}, step {m['step']:g} s"
+        if result.metadata.get("outcome") == "unreliable":
+            title += " (UNRELIABLE: see the sidecar)"
+        png = figure_png(run_figure(result.recorder, title, plot_roles(scene),
+                                    _reference_beside(out, result.recorder)))
+    result.csv, result.sidecar, result.png = write_run_set(out, result.recorder, result.metadata,
+                                                           png)
 
 
 FLOOR_FACTOR = 10.0  # an estimate below this x fmu_tolerance is flagged (the studies' floor)
@@ -322,6 +343,8 @@ def run_companion(scene, fmu_dir):
     t0 = time.perf_counter()
     try:
         result = run_scene(scene, RunOptions(out=None, fmu_dir=fmu_dir, progress=False))
+    except InterruptedRun:  # Ctrl-C: the user's, not a companion that stopped on its own
+        raise
     except CrankfmuError as err:  # RunError (it stopped) or a refused setting (too many steps)
         return CompanionRun(None, time.perf_counter() - t0, str(err))
     return CompanionRun(recorder_series(result.recorder), time.perf_counter() - t0,

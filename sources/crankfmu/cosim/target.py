@@ -298,19 +298,25 @@ def _tolerance_walk(scene, algorithm, extrapolation, target, fmu_dir, report, po
 
 def write_chosen(scene, result, report: TargetReport, out, plot_png: bool = False) -> None:
     """Write the chosen run as `crankfmu run` would (CSV, sidecar with "error_estimate" and
-    "target", PNG on request) and point `result` at the files."""
+    "target", PNG on request, as one set: results.write_run_set), its trust judged with the
+    search's estimate (cosim.trust), and point `result` at the files; `out` None: the
+    metadata only, nothing written."""
     from pathlib import Path
 
-    from .results import plot, write_csv, write_sidecar
+    from .results import figure_png, run_figure, write_run_set
     from .runner import plot_roles
-    out = Path(out)
-    write_csv(out, result.recorder)
+    from .trust import judge_result
+    result.estimate = report.estimate
     result.metadata["error_estimate"] = report.estimate.to_json()
     result.metadata["target"] = report.to_json()
-    result.csv, result.sidecar = out, out.with_suffix(".json")
-    write_sidecar(result.sidecar, result.metadata)
+    judge_result(scene, result)
+    if out is None:
+        return
+    png = None
     if plot_png:
-        result.png = out.with_suffix(".png")
         m = result.metadata["master"]
-        plot(result.png, result.recorder, f"{scene.name}: {m['algorithm']}, step {m['step']:g} s"
-             f" (target {report.target:g})", plot_roles(scene))
+        png = figure_png(run_figure(result.recorder, f"{scene.name}: {m['algorithm']}, step "
+                                    f"{m['step']:g} s (target {report.target:g})",
+                                    plot_roles(scene)))
+    result.csv, result.sidecar, result.png = write_run_set(Path(out), result.recorder,
+                                                           result.metadata, png)

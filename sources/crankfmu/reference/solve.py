@@ -14,8 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cosim.results import (Recorder, column_units, normalize_unit, versions, write_csv,
-                             write_sidecar)
+from ..cosim.results import Recorder, column_units, normalize_unit, versions, write_run_set
 from ..system.scene import Scene, SceneError
 from .composed import ComposedModel
 
@@ -31,6 +30,7 @@ class ReferenceResult:
     rhs_calls: int
     rtol: float
     method: str
+    png: Path | None = None
 
 
 def record_times(scene: Scene, interval: float | None = None) -> np.ndarray:
@@ -113,11 +113,11 @@ def solve_reference(scene: Scene, rtol: float = DEFAULT_RTOL, times=None,
                            model.integrator)
 
 
-def write_reference(scene: Scene, out: Path, result: ReferenceResult) -> ReferenceResult:
-    """The CSV (run layout) and its JSON sidecar."""
-    write_csv(out, result.recorder)
-    sidecar = out.with_suffix(".json")
-    write_sidecar(sidecar, {
+def write_reference(scene: Scene, out: Path, result: ReferenceResult,
+                    png: bytes | None = None) -> ReferenceResult:
+    """The CSV (run layout), its JSON sidecar and, given its bytes, the PNG: one set
+    (cosim.results.write_run_set)."""
+    result.csv, result.sidecar, result.png = write_run_set(out, result.recorder, {
         "scene": str(scene.path), "name": scene.name, "status": "completed",
         "kind": "monolithic reference", "start_time": scene.start_time,
         "stop_time": scene.stop_time, "units": column_units(result.recorder),
@@ -126,8 +126,7 @@ def write_reference(scene: Scene, out: Path, result: ReferenceResult) -> Referen
                       "record_points": result.recorder.count},
         "components": {n: {"fmu": c.fmu, "parameters": c.parameters, "effects": c.effects}
                        for n, c in scene.components.items()},
-        "versions": versions(), "wall_seconds": result.wall_seconds})
-    result.csv, result.sidecar = out, sidecar
+        "versions": versions(), "wall_seconds": result.wall_seconds}, png)
     return result
 
 

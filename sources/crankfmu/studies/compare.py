@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from ..system.analysis import LISTS, NUMBERS, analysis_roles
+from ..system.scene import SceneError
 
 
 @dataclass
@@ -116,26 +117,38 @@ def stroke_ends(time: np.ndarray, angle: np.ndarray, t0: float) -> list[float]:
 
 
 def metrics(s: Series) -> dict:
+    """The figures of the module's docstring; a figure that cannot be computed is nan, and
+    "missing" maps it to why (the run ends before the analysis window, no whole stroke)."""
     t, v = s.time, s.values
     ends = stroke_ends(t, v["crank_angle"], s.from_time)
     t_end = ends[-1] if ends else float(t[-1])
     window = (t >= s.from_time) & (t <= t_end)
-    w = v["crank_speed"][window]
-    tw = t[window]
-    w_mean = float(np.trapezoid(w, tw) / (tw[-1] - tw[0])) if len(tw) > 1 else math.nan
-    starts = [s.from_time] + ends[:-1]
-    energy = float(np.trapezoid(v["drive_power"][window], tw)) if len(tw) > 1 else math.nan
-    out = {
-        "strokes": len(ends),
-        "cycle_time": float(np.mean(np.subtract(ends, starts))) if ends else math.nan,
+    w, tw = v["crank_speed"][window], t[window]
+    out = {"strokes": len(ends), "window_start": s.from_time, "window_end": t_end,
+           "missing": {}}
+    if len(tw) < 2:
+        why = (f"the analysis window from from_time = {s.from_time:g} s to the run's end at "
+               f"{float(t[-1]):g} s holds {len(tw)} recorded point(s), fewer than 2")
+        names = ["cycle_time", "mean_crank_speed", "delta", "peak_drive_torque",
+                 "energy_per_stroke"] + (["peak_load_torque"] if "load_torque" in v else [])
+        return {**out, **{k: math.nan for k in names}, "missing": dict.fromkeys(names, why)}
+    w_mean = float(np.trapezoid(w, tw) / (tw[-1] - tw[0]))
+    energy = float(np.trapezoid(v["drive_power"][window], tw))
+    out.update({
+        "cycle_time": float(np.mean(np.subtract(ends, [s.from_time] + ends[:-1]))) if ends
+        else math.nan,
         "mean_crank_speed": w_mean,
-        "delta": float((w.max() - w.min()) / w_mean) if len(w) and w_mean else math.nan,
+        "delta": float((w.max() - w.min()) / w_mean) if w_mean else math.nan,
         "peak_drive_torque": float(np.max(np.abs(v["drive_torque"][window]))),
-        "energy_per_stroke": energy / len(ends) if ends else math.nan,
-        "window_start": s.from_time, "window_end": t_end,
-    }
+        "energy_per_stroke": energy / len(ends) if ends else math.nan})
     if "load_torque" in v:
         out["peak_load_torque"] = float(np.max(np.abs(v["load_torque"][window])))
+    if not ends:
+        out["missing"].update(dict.fromkeys(
+            ("cycle_time", "energy_per_stroke"), f"no whole crank revolution between "
+            f"from_time = {s.from_time:g} s and the run's end at {float(t[-1]):g} s"))
+    if not w_mean:
+        out["missing"]["delta"] = "the mean crank speed is 0"
     return out
 
 
@@ -177,16 +190,12 @@ def format_table(rows, la: str, lb: str) -> str:
     return "\n".join(lines)
 
 
-def write_table(path: Path, rows, la: str, lb: str) -> None:
-    with open(path, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["metric", "unit", la, lb, "B_minus_A", "relative"])
-        for row in rows:
-            w.writerow([row[0], row[1]] + [repr(float(x)) for x in row[2:]])
-
-
-def overlay_plot(path: Path, a: Series, b: Series, title: str) -> None:
-    overlay_figure(a, b, title).savefig(path, dpi=110)
+def write_table(f, rows, la: str, lb: str) -> None:
+    """The table as CSV into the file `f` (written by crankfmu.outputs.atomic_write)."""
+    w = csv.writer(f)
+    w.writerow(["metric", "unit", la, lb, "B_minus_A", "relative"])
+    for row in rows:
+        w.writerow([row[0], row[1]] + [repr(float(x)) for x in row[2:]])
 
 
 def overlay_figure(a: Series, b: Series, title: str):
@@ -212,23 +221,71 @@ def overlay_figure(a: Series, b: Series, title: str):
     return fig
 
 
-def compare_scenes(scene_a, scene_b, out_dir: Path, options, executor=None) -> dict:
+def compare_labels(scene_a, scene_b) -> tuple[str, str]:
+    """The runs' labels (their CSVs' names in the output folder): the scene names, or "A_" and
+    "B_" before them when they are equal or one is "compare" (the table's own name)."""
+    la, lb = scene_a.name, scene_b.name
+    if la == lb or "compare" in (la, lb):
+        la, lb = f"A_{la}", f"B_{lb}"
+    return la, lb
+
+
+def check_window(scene, from_time: float, key: str, stop_name: str = "--stop-time") -> None:
+    """The analysis window [from_time, stop_time] is not empty, so figures can be computed
+    (raises SceneError naming `key` and the option that lengthens the runs)."""
+    if not (math.isfinite(from_time) and from_time < scene.stop_time):
+        raise SceneError(scene.path, key, f"{from_time:g} s is not before the stop time "
+                         f"{scene.stop_time:g} s: the runs would end before the analysis "
+                         f"window starts, so they would have no figures; lengthen the runs "
+                         f"({stop_name}) or start the window earlier")
+
+
+def check_compare_outputs(scene_a, scene_b, out_dir, option: str = "--out",
+                          stop_option: str = "--stop-time") -> Path:
+    """Before any run: the output folder and every name compare writes there
+    (crankfmu.outputs); the analysis window of each scene ends before its stop time."""
+    from ..cosim.results import check_run_set
+    from ..outputs import check_files
+    for scene in (scene_a, scene_b):
+        check_window(scene, analysis_roles(scene)["from_time"], "[analysis].from_time",
+                     stop_option)
+    out_dir = Path(out_dir)
+    check_files(out_dir, ["compare.csv", "compare.png"], option)
+    for label in compare_labels(scene_a, scene_b):
+        check_run_set(out_dir / f"{label}.csv", option)
+    return out_dir
+
+
+def compare_scenes(scene_a, scene_b, out_dir: Path, options, executor=None,
+                   option: str = "--out", stop_option: str = "--stop-time") -> dict:
     """Run both scenes into out_dir; write compare.csv and compare.png; return the results.
     With an `executor` (crankfmu.studies.executor) both runs go through it (in parallel on a
-    pool or cluster); without one they run in this process one after the other. Same numbers."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    la, lb = scene_a.name, scene_b.name
-    if la == lb:
-        la, lb = f"A_{la}", f"B_{lb}"
-    analysis_roles(scene_a), analysis_roles(scene_b)  # fail before running anything
+    pool or cluster); without one they run in this process one after the other. Same numbers.
+    Everything is checked before the runs (check_compare_outputs)."""
+    from ..cosim.results import save_figure
+    from ..outputs import atomic_write
+    out_dir = check_compare_outputs(scene_a, scene_b, out_dir, option, stop_option)
+    la, lb = compare_labels(scene_a, scene_b)
     if executor is None:
         a = run_for_comparison(scene_a, la, out_dir, options)
         b = run_for_comparison(scene_b, lb, out_dir, options)
     else:
         a, b = _run_both(executor, [(scene_a, la), (scene_b, lb)], out_dir, options)
     rows = compare_table(a, b)
-    write_table(out_dir / "compare.csv", rows, la, lb)
-    overlay_plot(out_dir / "compare.png", a, b, f"{la} (A) vs {lb} (B)")
-    return {"rows": rows, "text": format_table(rows, la, lb), "a": a, "b": b,
+    atomic_write(out_dir / "compare.csv", lambda f: write_table(f, rows, la, lb))
+    save_figure(overlay_figure(a, b, f"{la} (A) vs {lb} (B)"), out_dir / "compare.png")
+    text = format_table(rows, la, lb)
+    notes = missing_notes({la: metrics(a), lb: metrics(b)})
+    return {"rows": rows, "text": text + ("\n" + notes if notes else ""), "a": a, "b": b,
             "csv": out_dir / "compare.csv", "png": out_dir / "compare.png"}
+
+
+def missing_notes(by_label: dict) -> str:
+    """One line per run whose figures are missing, saying which and why."""
+    lines = []
+    for label, m in by_label.items():
+        reasons: dict[str, list[str]] = {}
+        for figure, why in m["missing"].items():
+            reasons.setdefault(why, []).append(figure)
+        lines += [f"{label}: no {', '.join(f)}: {why}" for why, f in reasons.items()]
+    return "\n".join(lines)

@@ -232,19 +232,19 @@ def _execute(task: RunTask, files: dict) -> RunOutput:
 
 
 def write_run_files(output: RunOutput, csv: Path, fmu_paths: dict | None = None) -> Path:
-    """The parent writes a run's CSV (the runner's layout, floats exact) and JSON sidecar."""
-    from ..cosim.results import Recorder, write_csv, write_sidecar
+    """The parent writes a run's CSV (the runner's layout, floats exact) and JSON sidecar, as
+    one set (cosim.results.write_run_set)."""
+    from ..cosim.results import Recorder, write_run_set
 
     rec = Recorder(list(output.names), list(output.units))
     for row in (output.rows if output.rows is not None else []):
         rec.add(row[0], row[1:])
-    write_csv(csv, rec)
     side = dict(output.sidecar)
     if fmu_paths and "components" in side:  # name the parent's files, not the worker's copies
         side["components"] = {n: {**c, "fmu": str(fmu_paths.get(n, c.get("fmu")))}
                               for n, c in side["components"].items()}
     side["worker"] = output.worker
-    write_sidecar(csv.with_suffix(".json"), side)
+    write_run_set(csv, rec, side)
     return csv
 
 

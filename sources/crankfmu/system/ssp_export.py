@@ -13,7 +13,7 @@ What goes where (docs/ssp.md has the full table):
 """
 from __future__ import annotations
 
-import os
+import io
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,6 +23,7 @@ from lxml import etree
 from ..version import __version__
 from ..errors import MAX_STEPS
 from ..fmu.instance3 import value_type
+from ..outputs import atomic_write
 from ..fmu.units import base_unit_attributes
 from .scene import Scene
 from ..runtime.slave import DEFAULT_TOLERANCE
@@ -279,15 +280,15 @@ def scene_annotation(scene: Scene):
 
 
 def write_archive(path: Path, ssd: bytes, resources: dict[str, Path]) -> None:
-    """The zip, written beside and renamed into place so a reader never sees half a file."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with zipfile.ZipFile(tmp, "w") as zf:
+    """The zip, built in memory and written through crankfmu.outputs.atomic_write: a reader
+    never sees half a file, and a name that is not a regular file is never replaced."""
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w") as zf:
         zf.writestr(zipfile.ZipInfo(SSD_NAME, ZIP_DATE), ssd, zipfile.ZIP_DEFLATED)
         for name in sorted(resources):  # FMUs are zips already: stored, not recompressed
             zf.writestr(zipfile.ZipInfo(name, ZIP_DATE), resources[name].read_bytes(),
                         zipfile.ZIP_STORED)
-    os.replace(tmp, path)
+    atomic_write(path, lambda f: f.write(buffer.getvalue()))
 
 
 def fmpy_parameter_set(ssp_path):

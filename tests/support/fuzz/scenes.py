@@ -432,13 +432,36 @@ def scene_cases(seed: int, n: int) -> list[dict]:
 
 
 def write_case(case: dict, folder: Path) -> Path:
-    """The case's files in `folder`; returns the scene file's path."""
+    """The case's files in `folder` (bytes, None: a folder, ("fifo",), ("symlink", target));
+    returns the scene file's path."""
+    import os
     folder.mkdir(parents=True, exist_ok=True)
     for name, data in case["files"].items():
         path = folder / name
         path.parent.mkdir(parents=True, exist_ok=True)
         if data is None:
             path.mkdir(exist_ok=True)
+        elif data == ("fifo",):
+            os.mkfifo(path)
+        elif isinstance(data, tuple) and data[0] == "symlink":
+            path.symlink_to(data[1])
         else:
             path.write_bytes(data)
     return folder / case["scene"]
+
+
+def snapshot(folder: Path, paths) -> dict:
+    """What `paths` (relative to `folder`) are: kind, inode and, for a regular file, bytes."""
+    import os
+    import stat
+    found = {}
+    for name in paths:
+        path = folder / name
+        try:
+            st = os.lstat(path)
+        except OSError:
+            found[name] = None
+            continue
+        data = path.read_bytes() if stat.S_ISREG(st.st_mode) else None
+        found[name] = (stat.S_IFMT(st.st_mode), st.st_ino, data)
+    return found

@@ -15,9 +15,10 @@ from ...cosim.metrics import (METRICS, Metric, MetricError, make_metric, observe
                       scene_metric_name, steady_figures)
 from .report import (format_orders, format_outcome, format_table, plot_estimates,
                      plot_work_precision, write_table_csv)
-from .sweep import (FLOOR_FACTOR, UNSTABLE_ERROR, Outcome, Setting, cheapest, fewest_steps,
-                    is_variable_step, load_or_solve_reference, orders, read_reference_file,
-                    reference_grid, resume_key, run_one, run_settings, settings_for)
+from .sweep import (FLOOR_FACTOR, UNSTABLE_ERROR, Outcome, Setting, check_run_files, cheapest,
+                    fewest_steps, is_variable_step, load_or_solve_reference, orders,
+                    read_reference_file, reference_grid, resume_key, run_one, run_settings,
+                    settings_for)
 
 DEFAULT_STEP_FACTORS = (4.0, 2.0, 1.0, 0.5)          # x the scene's step
 DEFAULT_TOLERANCES = (1e-2, 1e-3, 1e-4)              # a variable-step master's sweep
@@ -52,6 +53,7 @@ class AccuracyOptions:
     scheduler: str | None = None               # a Dask scheduler's address instead
     executor: object | None = None             # or any crankfmu.studies.executor.Executor
     estimate: bool = True                      # the error estimate of each run (its companions)
+    out_option: str = "--out"                  # how errors name out_dir (the API: "out")
 
 
 @dataclass
@@ -84,10 +86,9 @@ def run_accuracy(scene, options: AccuracyOptions) -> AccuracyResult:
         options.fmu_tolerances or [scene.master.fmu_tolerance], options.tolerances)
     if options.algorithms is None:
         settings = [s for s in settings if not _excluded_by_default(s)]
-    out = Path(options.out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     from .estimates import add_estimates, extra_companions
     companions = extra_companions(settings) if options.estimate else []
+    out = check_outputs(Path(options.out_dir), settings + companions, options)
     ref, ref_csv, cached, ref_key = _reference(scene, settings + companions, metric, out,
                                                options)
     from ..executor import make_executor
@@ -115,6 +116,23 @@ def run_accuracy(scene, options: AccuracyOptions) -> AccuracyResult:
                           cheapest(outcomes, options.target),
                           fewest_steps(outcomes, options.target), metric, ref_csv, cached, csv,
                           png)
+
+
+def check_outputs(out: Path, settings: list[Setting], options: AccuracyOptions) -> Path:
+    """Before the reference and the runs: at most MAX_STUDY_RUNS runs, the output folder and
+    every name written there and in runs/ (crankfmu.outputs); returns the folder."""
+    from ...cosim.results import check_run_set
+    from ...errors import MAX_STUDY_RUNS, OptionError
+    from ...outputs import check_files
+    if len(settings) > MAX_STUDY_RUNS:
+        raise OptionError(f"{len(settings)} runs (algorithms x extrapolations x steps or "
+                          f"tolerances x FMU tolerances, with the estimates' companions), more "
+                          f"than the limit of {MAX_STUDY_RUNS} runs of one study")
+    check_files(out, ["accuracy.csv", "work_precision.png", "estimate_vs_error.png"],
+                options.out_option)
+    check_run_set(out / "reference.csv", options.out_option)
+    check_run_files(out / "runs", settings, options.out_option)
+    return out
 
 
 def _reference(scene, settings, metric: Metric, out: Path, options: AccuracyOptions):

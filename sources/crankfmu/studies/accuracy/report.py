@@ -21,11 +21,15 @@ def _row(o: Outcome) -> list:
 
 
 def write_table_csv(path: Path, outcomes: list[Outcome], metric: str) -> None:
-    with open(path, "w", newline="") as f:
+    """accuracy.csv, written through crankfmu.outputs.atomic_write."""
+    from ...outputs import atomic_write
+
+    def write(f) -> None:
         w = csv.writer(f)
         w.writerow(["metric"] + list(COLUMNS))
         for o in outcomes:
             w.writerow([metric] + _row(o))
+    atomic_write(path, write)
 
 
 TABLE_HEAD = (f"{'algorithm':<13} {'ex':>2} {'step [s]':>9} {'fmu tol':>7} {'tol':>7} "
@@ -79,7 +83,7 @@ def plot_work_precision(path: Path, outcomes: list[Outcome], metric_text: str,
                         target: float | None, title: str) -> None:
     """Error against wall time (left) and against doStep calls (right), log-log, one line per
     master / extrapolation / FMU tolerance."""
-    from ...cosim.results import PALETTE, new_figure
+    from ...cosim.results import PALETTE, new_figure, save_figure
 
     groups: dict[tuple, list[Outcome]] = {}
     for o in outcomes:
@@ -112,13 +116,13 @@ def plot_work_precision(path: Path, outcomes: list[Outcome], metric_text: str,
     axes[1].legend(fontsize=7)
     fig.suptitle(f"{title}\nerror = {metric_text}", fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path)
 
 
 def plot_estimates(path: Path, outcomes: list[Outcome], title: str) -> None:
     """Estimated against true error, log-log, one marker per master and extrapolation, with the
     diagonal and the band of a factor 3 either side."""
-    from ...cosim.results import PALETTE, new_figure
+    from ...cosim.results import PALETTE, new_figure, save_figure
 
     points = [(o, o.extra.get("estimated_error")) for o in outcomes]
     points = [(o, e) for o, e in points if o.ok and o.error > 0 and e is not None and e > 0]
@@ -146,4 +150,4 @@ def plot_estimates(path: Path, outcomes: list[Outcome], title: str) -> None:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path)

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ...cosim.results import versions
+from ...outputs import atomic_write
 from ...reference import record_times, solve_reference, write_reference
 from ...cosim.metrics import Metric, MetricError, ReferenceSamples, observed_order
 
@@ -164,7 +165,8 @@ def load_or_solve_reference(scene, grid: np.ndarray, out_dir: Path, rtol: float,
     write_reference(scene, csv, result)
     meta = json.loads(side.read_text())
     meta["cache_key"] = key
-    side.write_text(json.dumps(meta, indent=2) + "\n")
+    text = json.dumps(meta, indent=2) + "\n"
+    atomic_write(side, lambda f: f.write(text))
     rec = result.recorder
     return ReferenceSamples(rec.rows[:, 0], {n: rec.column(n) for n in rec.names}), csv, False
 
@@ -273,6 +275,17 @@ def _outcome_file(runs_dir: Path, setting: Setting) -> Path:
     return Path(runs_dir) / f"{setting.label}.outcome.json"
 
 
+def check_run_files(runs_dir: Path, settings: list[Setting], option: str = "--out") -> None:
+    """Before any run: runs_dir is (or can be made) a folder, and none of the names the
+    settings' runs and outcomes take there is anything but a regular file (crankfmu.outputs)."""
+    from ...cosim.results import check_run_set
+    from ...outputs import check_file, output_folder
+    output_folder(runs_dir, option)
+    for s in settings:
+        check_run_set(Path(runs_dir) / f"{s.label}.csv", option)
+        check_file(_outcome_file(runs_dir, s), option)
+
+
 def _kept_outcome(runs_dir: Path, setting: Setting, key: str) -> Outcome | None:
     path = _outcome_file(runs_dir, setting)
     try:
@@ -287,11 +300,10 @@ def _kept_outcome(runs_dir: Path, setting: Setting, key: str) -> Outcome | None:
 def _keep_outcome(runs_dir: Path, outcome: Outcome, key: str) -> None:
     runs_dir = Path(runs_dir)
     runs_dir.mkdir(parents=True, exist_ok=True)
-    path = _outcome_file(runs_dir, outcome.setting)
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps({"key": key + outcome.setting.label,
-                               "outcome": outcome.to_json()}, indent=1, default=float) + "\n")
-    tmp.replace(path)  # atomic: an interrupted sweep never leaves half an outcome
+    text = json.dumps({"key": key + outcome.setting.label, "outcome": outcome.to_json()},
+                      indent=1, default=float) + "\n"
+    # atomic: an interrupted sweep never leaves half an outcome
+    atomic_write(_outcome_file(runs_dir, outcome.setting), lambda f: f.write(text))
 
 
 def _outcome(setting: Setting, output, task, metric: Metric, ref: ReferenceSamples,

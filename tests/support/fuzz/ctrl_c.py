@@ -1,0 +1,100 @@
+"""Ctrl-C at a random moment of `crankfmu run` (tests/test_ctrl_c.py, scripts/fuzz.py --ctrl-c).
+
+Each trial starts crankfmu as `python -m crankfmu` does (runpy, `__main__`), from a launcher
+that tells the caller when the interpreter is ready, so the moment falls in crankfmu's own life:
+its imports ("imports": 0 to 0.2 s after the interpreter is up), its run ("run": 0.2 to 4 s,
+a 1000 s scene: loading, stepping), or its exit handlers ("shutdown": an exit handler the
+launcher registers first runs last and takes 0.6 s; 0 to 0.5 s into it). The interpreter's own
+start-up before crankfmu/__main__.py's first line (site.py, runpy, the package's __init__) is
+Python's, as for any Python program.
+
+A trial is clean when the status is 130, stderr says "interrupted" and holds no traceback and
+no "Exception ignored", and a CSV written (if any) is finite with a sidecar that counts its rows
+and says how the run ended.
+"""
+from __future__ import annotations
+
+import json
+import random
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .scenes import ROTOR  # the fuzz's short scene: "rotor", 0.05 s at 1 ms steps
+
+LAUNCHER = """
+import atexit, runpy, sys, time
+def last_exit_handler():  # registered first, so it runs last: a long shutdown to interrupt
+    sys.stdout.write("E"); sys.stdout.flush(); time.sleep(0.6)
+atexit.register(last_exit_handler)
+import crankfmu  # what runpy imports first: the package's __init__ (its version only)
+sys.stdout.write("R"); sys.stdout.flush()
+sys.argv = ["crankfmu"] + sys.argv[1:]
+runpy.run_module("crankfmu", run_name="__main__", alter_sys=True)
+"""
+
+PHASES = ("imports", "run", "shutdown")
+
+
+def rotor(stop: float) -> str:
+    """The fuzz's rotor scene with another stop time [s]."""
+    return ROTOR.replace("stop_time = 0.05", f"stop_time = {stop!r}")
+
+
+def start(scene: Path, out: Path, fmu_dir: Path, cwd: Path, *extra) -> subprocess.Popen:
+    """`crankfmu run` through the launcher, returned once the interpreter is up."""
+    proc = subprocess.Popen([sys.executable, "-c", LAUNCHER, "run", str(scene), "--fmus",
+                             str(fmu_dir), "--out", str(out), "--no-progress", *extra],
+                            cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert proc.stdout.read(1) == b"R"
+    return proc
+
+
+def _wait_for_shutdown(proc: subprocess.Popen) -> None:
+    while True:
+        c = proc.stdout.read(1)
+        assert c, "ended before its exit handlers ran"
+        if c == b"E":
+            return
+
+
+def trial(phase: str, rng: random.Random, work: Path, fmu_dir: Path, cwd: Path) -> dict:
+    """One Ctrl-C in `phase`; returns phase, delay, status, stderr, clean (see the docstring)."""
+    scene = work / f"ctrl_c_{phase}.toml"
+    scene.write_text(rotor(1000.0 if phase == "run" else 0.02))
+    out = work / f"ctrl_c_{phase}_{rng.random():.9f}"
+    proc = start(scene, out, fmu_dir, cwd, "--no-estimate")
+    if phase == "imports":
+        delay = rng.uniform(0.0, 0.2)
+    elif phase == "run":
+        delay = rng.uniform(0.2, 4.0)
+    else:
+        _wait_for_shutdown(proc)
+        delay = rng.uniform(0.0, 0.5)
+    time.sleep(delay)
+    proc.send_signal(signal.SIGINT)
+    _, stderr = proc.communicate(timeout=120)
+    stderr = stderr.decode(errors="replace")
+    clean = proc.returncode == 130 and "interrupted" in stderr and "Traceback" not in stderr \
+        and "Exception ignored" not in stderr and _written_is_whole(out / "rotor.csv", phase)
+    return {"phase": phase, "delay": delay, "status": proc.returncode, "stderr": stderr,
+            "clean": clean}
+
+
+def _written_is_whole(csv: Path, phase: str) -> bool:
+    if not csv.is_file():
+        return True  # interrupted before anything was written
+    rows = np.loadtxt(csv, delimiter=",", skiprows=1, ndmin=2)
+    meta = json.loads(csv.with_suffix(".json").read_text())
+    return bool(np.all(np.isfinite(rows))) and meta["csv"]["rows"] == len(rows) and \
+        meta["outcome"] == ("interrupted" if phase == "run" else "completed")
+
+
+def campaign(n: int, seed: int, work: Path, fmu_dir: Path, cwd: Path) -> list[dict]:
+    """n trials, the phases in turn."""
+    rng = random.Random(seed)
+    return [trial(PHASES[k % len(PHASES)], rng, work, fmu_dir, cwd) for k in range(n)]

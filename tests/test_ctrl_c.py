@@ -1,0 +1,55 @@
+"""Ctrl-C whenever it comes: `crankfmu run` ends with exit status 130, says "interrupted", and
+prints no traceback and no "Exception ignored" (crankfmu/__main__.py).
+
+Before: a Ctrl-C while crankfmu was imported (the first ~0.2 s) printed a traceback; one during
+the interpreter's exit handlers printed "Exception ignored in atexit callback" and the exit
+status stayed 0; now and then the process died by SIGINT right after writing its results; a
+Ctrl-C while the error estimate's companion ran was taken for a companion that stopped, and
+the command ended with exit status 0.
+
+The trials (tests/support/fuzz/ctrl_c.py, also scripts/fuzz.py --ctrl-c) send the Ctrl-C at a
+random moment of crankfmu's imports, its run, or its exit handlers.
+"""
+from __future__ import annotations
+
+import json
+import signal
+
+from tests.conftest import ROOT
+from tests.support.fuzz.ctrl_c import campaign, rotor
+
+
+def test_ctrl_c_20_of_20_at_random_times(tmp_path, fmu_dir):
+    trials = campaign(20, 27, tmp_path, fmu_dir, ROOT)
+    print("\n".join(f"{t['phase']:9} {t['delay']:.3f} s: status {t['status']}" for t in trials))
+    assert [t for t in trials if not t["clean"]] == []
+
+
+def test_ctrl_c_during_the_estimate_companion_keeps_the_run_and_exits_130(tmp_path, fmu_dir,
+                                                                          monkeypatch, capsys):
+    """The companion at half the step runs here after the run (--jobs 1). A Ctrl-C there
+    used to be taken for a companion that stopped: the estimate said "none" and the exit
+    status was 0. Now the run's results are written without an estimate, exit status 130.
+    The Ctrl-C is sent by the companion's own stepping loop (this process, SIGINT) at its
+    fifth step: the same path as a key press at that moment."""
+    import os
+
+    from crankfmu.cli import main
+    from crankfmu.cosim import runner
+    scene = tmp_path / "rotor.toml"
+    scene.write_text(rotor(0.05))
+    fixed_steps = runner._fixed_steps
+
+    def steps(master, scene, progress):
+        for k, item in enumerate(fixed_steps(master, scene, progress)):
+            if scene.master.step < 1e-3 and k == 5:  # the companion: half the scene's step
+                os.kill(os.getpid(), signal.SIGINT)
+            yield item
+    monkeypatch.setattr(runner, "_fixed_steps", steps)
+    status = main(["run", str(scene), "--fmus", str(fmu_dir), "--out", str(tmp_path / "out"),
+                   "--no-progress"])
+    err = capsys.readouterr().err
+    assert status == 130 and "companion" in err, err
+    meta = json.loads((tmp_path / "out" / "rotor.json").read_text())
+    assert meta["outcome"] == "completed" and meta["csv"]["rows"] == 51
+    assert meta["error_estimate"]["estimated_error"] is None
