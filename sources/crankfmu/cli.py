@@ -173,7 +173,6 @@ def _run_target(scene, out: Path, args) -> int:
 
 
 def _print_run(scene, result, estimate=None) -> None:
-    from .cosim.estimate import format_estimate
     from .masters import MASTERS
     m = result.metadata.get("master", {})  # the run's setting (--target chooses it)
     cls = MASTERS[m["algorithm"]]
@@ -197,6 +196,7 @@ def _print_run(scene, result, estimate=None) -> None:
                                                   f" J through the port)" if rel is not None else ""))
     estimate = estimate or result.estimate
     if estimate is not None:
+        from .cosim.estimate import format_estimate
         print("  " + format_estimate(estimate))
     print(f"wrote {result.csv}, {result.sidecar}" + (f", {result.png}" if result.png else ""))
 
@@ -261,7 +261,9 @@ def _format(record) -> str:
     return text
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The whole command line; with `command` (a command's name) only that command is
+    registered, so `crankfmu run` imports nothing of the studies (`python -X importtime`)."""
     parser = argparse.ArgumentParser(prog="crankfmu", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"crankfmu {__version__}")
     parser.add_argument("-v", "--verbose", action="count", default=0,
@@ -270,17 +272,30 @@ def build_parser() -> argparse.ArgumentParser:
                         help="fewer messages: warnings and errors only (-qq: errors only); "
                              "no progress bars")
     sub = parser.add_subparsers(dest="command", required=True)
-    run = sub.add_parser("run", help="run a scene")
-    _add_run_options(run)
-    run.set_defaults(func=cmd_run)
-    build = sub.add_parser("build", help="build every FMU into fmus/ and validate it")
-    from .fmu.build import add_arguments
-    add_arguments(build)
-    build.set_defaults(func=cmd_build)
+    if command in (None, "run"):
+        run = sub.add_parser("run", help="run a scene")
+        _add_run_options(run)
+        run.set_defaults(func=cmd_run)
+    if command in (None, "build"):
+        build = sub.add_parser("build", help="build every FMU into fmus/ and validate it")
+        from .fmu.build import add_arguments
+        add_arguments(build)
+        build.set_defaults(func=cmd_build)
     from . import commands
     for mod in pkgutil.iter_modules(commands.__path__):
-        importlib.import_module(f"{commands.__name__}.{mod.name}").register(sub)
+        if command in (None, mod.name.replace("_", "-")):
+            importlib.import_module(f"{commands.__name__}.{mod.name}").register(sub)
     return parser
+
+
+def _command_named(argv: list[str]) -> str | None:
+    """The command `argv` names (its first word after the global options), if it is one;
+    None otherwise (then every command is registered: help, or the error listing them)."""
+    from . import commands
+    words = [a for a in argv if not a.startswith("-")]
+    known = {"run", "build"} | {m.name.replace("_", "-")
+                                for m in pkgutil.iter_modules(commands.__path__)}
+    return words[0] if words and words[0] in known else None
 
 
 def main(argv=None) -> int:
@@ -288,7 +303,8 @@ def main(argv=None) -> int:
     option or archive, a failed run), 130 for Ctrl-C; no traceback for anything a user can do."""
     from .errors import CrankfmuError
     try:
-        parser = build_parser()
+        argv = sys.argv[1:] if argv is None else list(argv)
+        parser = build_parser(_command_named(argv))
         args = parser.parse_args(argv)
     except KeyboardInterrupt:  # Ctrl-C while the commands are imported
         print("error: interrupted (Ctrl-C)", file=sys.stderr)

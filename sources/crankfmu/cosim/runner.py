@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 import signal
+import sys
 import threading
 import time
 import zipfile
@@ -446,10 +447,17 @@ def _fmi_failure(err, fmus, log: LogCollector, t: float) -> str:
         (f"; the FMU said: {' | '.join(reasons)}" if reasons else "")
 
 
+def _on_terminal() -> bool:
+    try:
+        return sys.stderr.isatty()
+    except (AttributeError, ValueError):  # replaced or closed: as tqdm takes it, no terminal
+        return False
+
+
 def _progress(steps, enabled, label, total=None):
     """A tqdm bar over `steps`, or (steps None) a bar over `total` seconds of simulated time."""
-    if enabled is False:
-        return steps
+    if enabled is False or (enabled is None and not _on_terminal()):
+        return steps  # tqdm draws nothing there (disable=None): not even imported
     from tqdm import tqdm
     if steps is None:
         return tqdm(total=total, desc=label, unit="s", disable=None if enabled is None else False,
