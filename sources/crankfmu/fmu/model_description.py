@@ -6,11 +6,10 @@ the physics class, so units, ranges, dependencies and a content-derived GUID are
 """
 from __future__ import annotations
 
-import hashlib
-import uuid
 from xml.etree.ElementTree import Element, SubElement, indent, tostring
 
 from ..runtime.slave import DEFAULT_TOLERANCE, ModelSlave, variable_table
+from .bundle import guid as build_guid
 from .units import base_unit_attributes
 
 
@@ -69,9 +68,9 @@ def model_description(slave_class: type[ModelSlave], build_id: str) -> bytes:
     GUID, so identical sources give an identical file."""
     physics = slave_class.physics_class
     table = variable_table(physics)
-    guid = uuid.uuid5(uuid.NAMESPACE_URL, f"crankfmu:{physics.model_name}:{build_id}")
     root = Element("fmiModelDescription", {
-        "fmiVersion": "2.0", "modelName": physics.model_name, "guid": "{%s}" % guid,
+        "fmiVersion": "2.0", "modelName": physics.model_name,
+        "guid": build_guid(physics.model_name, build_id),
         "description": physics.description, "author": "crankfmu",
         "version": build_id, "generationTool": "crankfmu build (pythonfmu 0.7)",
         "variableNamingConvention": "structured", "numberOfEventIndicators": "0"})
@@ -91,10 +90,3 @@ def model_description(slave_class: type[ModelSlave], build_id: str) -> bytes:
     _model_structure(root, table)
     indent(root)
     return b'<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(root, encoding="utf-8") + b"\n"
-
-
-def sources_digest(files: list[tuple[str, bytes]]) -> str:
-    h = hashlib.sha256()
-    for name, data in sorted(files):
-        h.update(name.encode() + b"\0" + data + b"\0")
-    return h.hexdigest()[:12]

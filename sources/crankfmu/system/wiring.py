@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .scene import Scene, SceneError
-from ..fmu.instance import FmuInstance
+from ..fmu.instance import FmuInstance, fmu_file_problem
 
 log = logging.getLogger(__name__)
 
@@ -32,19 +32,21 @@ def resolve_fmu(scene: Scene, comp_name: str, fmu_dir: Path) -> Path:
     key = f"[components.{comp_name}].fmu"
     if ref.endswith(".fmu"):
         path = (scene.path.parent / ref).resolve()
-        if not path.is_file():
-            raise SceneError(scene.path, key, f"no FMU file at {path}")
+        problem = fmu_file_problem(path)
+        if problem is not None:
+            raise SceneError(scene.path, key, problem)
         return path
-    from ..fmu.build import build_fmu, current_build_id
+    from ..fmu.build import build_fmu, rebuild_reason
     from ..models.catalog import FMU_MODELS
     if ref not in FMU_MODELS:
         raise SceneError(scene.path, key, f"unknown FMU {ref!r}; known: {', '.join(FMU_MODELS)}"
                                           " or a path ending in .fmu")
     path = fmu_dir / f"{ref}.fmu"
-    if not path.is_file() or _build_id(path) != current_build_id(ref):
+    rebuild = rebuild_reason(path, ref)
+    if rebuild is not None:
         from ..fmu.build import PACKAGE_DIR
-        log.info("building %s (%s) from %s", path, "FMU missing" if not path.is_file() else
-                 "sources changed", PACKAGE_DIR)
+        (log.warning if rebuild.damaged else log.info)(
+            "building %s (%s) from %s", path, rebuild.reason, PACKAGE_DIR)
         warn_if_tree_differs(scene.path.resolve().parent.parent)
         build_fmu(ref, fmu_dir)
     return path
@@ -75,14 +77,6 @@ def warn_if_tree_differs(tree: Path) -> None:
                     "editable (pip install -e %s)", PACKAGE_DIR, tree / "sources" / "crankfmu",
                     ", ".join(differ[:3]), f" and {len(differ) - 3} more" if len(differ) > 3
                     else "", tree)
-
-
-def _build_id(path: Path) -> str | None:
-    from fmpy import read_model_description
-    try:
-        return read_model_description(str(path)).version
-    except Exception:  # an unreadable FMU is rebuilt
-        return None
 
 
 @dataclass
