@@ -9,6 +9,22 @@ ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"
 
 
+def pytest_configure(config) -> None:
+    """The FMUs the tests load unpack into a cache of this test run (crankfmu.fmu.archive), not
+    the user's; the processes the tests start inherit it (xdist's workers: the controller's)."""
+    import os
+    import tempfile
+    if "CRANKFMU_CACHE_DIR" not in os.environ:
+        os.environ["CRANKFMU_CACHE_DIR"] = config._crankfmu_cache = tempfile.mkdtemp(
+            prefix="crankfmu-test-fmus-")
+
+
+def pytest_unconfigure(config) -> None:
+    import shutil
+    if getattr(config, "_crankfmu_cache", None):
+        shutil.rmtree(config._crankfmu_cache, ignore_errors=True)
+
+
 def pytest_sessionstart(session) -> None:
     """With pytest-xdist (pyproject.toml's addopts: one worker process per core, whole test files
     per worker), the controller brings the repository's fmus/ up to date before the workers

@@ -53,7 +53,7 @@ def build_from_copy(tmp: Path, dest: Path, build_id: str | None = None) -> Path:
         f.write(MARKER)
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(build, "PACKAGE_DIR", package)
-        digest = build_id or build.digest_of(build.catalog_sources("DcServoMotor"))  # the copy's own
+        digest = build_id or build.digest_of(build.catalog_sources("DcServoMotor"))  # its own
         mp.setattr(build, "current_build_id", lambda model: digest)  # the cached real id stays intact
         return build.build_fmu("DcServoMotor", dest)
 
@@ -63,7 +63,8 @@ def run_in_fresh_process(fmus: list[tuple[str, Path]]) -> dict:
     outputs, the runtime packages it imported, and the refusals (name -> message)."""
     script = (
         "import json, sys\n"
-        "from crankfmu.fmu.instance import FmuInstance, FmuRefused\n"
+        "from crankfmu.fmu.archive import FmuRefused\n"
+        "from crankfmu.fmu.instance import FmuInstance\n"
         "from tests.support.importer_support import step_together\n"
         "specs, refused = [], {}\n"
         "for n, p in json.loads(sys.argv[1]):\n"

@@ -19,6 +19,7 @@ import argparse
 import functools
 import hashlib
 import importlib.util
+import io
 import os
 import sys
 import tempfile
@@ -29,14 +30,17 @@ from pathlib import Path
 from ..models.catalog import FMU_MODELS, model_folder
 from . import launcher
 from .bundle import (MARK, PYTHONFMU, SLAVE_MODULE, check_description, digest_of, entry_module,
-                     find_bundle, package_name, read_bundle, render)
+                     find_bundle, package_name, render)
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
 RUNTIME_DIR = "runtime"  # bundled whole in every FMU, with the model's folder
 # The runtime imports all its modules at once: a later FMU of the same build finds them in
 # sys.modules even after the FMU that first loaded the package was freed and its files deleted.
 # The launcher's source is named here so that a new launcher is a new build.
-RUNTIME_INIT = '''"""crankfmu runtime bundled in FMUs (build {digest}; launcher.c sha256 {launcher})."""
+RUNTIME_INIT = '''"""crankfmu runtime bundled in FMUs (build {digest}).
+
+Built with the FMU launcher whose launcher.c has SHA-256 {launcher}.
+"""
 import importlib
 import pkgutil
 
@@ -96,7 +100,9 @@ def bundle_sources(model_name: str | None, class_name: str, entry_script: str
     files[f"{entry_module(MARK, class_name)}.py"] = entry_script.encode()
     files[SLAVE_MODULE] = entry_module(MARK, class_name).encode()
     pythonfmu = Path(importlib.util.find_spec("pythonfmu").origin).parent  # not imported
-    files.update({PYTHONFMU + p.name: p.read_bytes() for p in sorted(pythonfmu.glob("*.py"))})
+    files.update({PYTHONFMU + name: (pythonfmu / name).read_bytes()
+                  for name in sorted(os.listdir(pythonfmu))
+                  if name.endswith(".py") and not name.startswith(".")})  # as its glob
     return files
 
 
@@ -173,7 +179,7 @@ def repack(built: Path, target: Path, slave_class, digest: str, rendered: dict[s
     model_identifier = slave_class.physics_class.model_name
     compiled = launcher.compile_launcher()
     launcher.package_binary(entries, model_identifier, compiled)
-    if card is not None:  # with the section on hosting the FMU (without a launcher: what that means)
+    if card is not None:  # with the section on hosting it (without a launcher: what that means)
         entries["documentation/index.html"] = card.replace(
             "</body>", launcher.hosting_html(compiled is not None) + "</body>").encode()
     write_atomically(target, entries)
@@ -246,19 +252,19 @@ def rebuild_reason(path: Path, model_name: str) -> Rebuild | None:
     build and this platform's binaries. Otherwise why it must be built."""
     from fmpy import platform, sharedLibraryExtension
 
-    from .instance import check_members, parse_safe_xml
+    from .archive import inspect, parse_safe_xml, read_fmu
     if not path.is_file():
         return Rebuild("FMU missing", False)
     binary = f"binaries/{platform}/{model_name}{sharedLibraryExtension}"
     try:
-        with zipfile.ZipFile(path) as zf:
-            check_members(zf)
+        data, key = read_fmu(path)
+        with zipfile.ZipFile(io.BytesIO(data)) as zf:
             bundle = find_bundle(zf)
             if bundle is None:
                 return Rebuild("not a crankfmu build: no bundled crankfmu package", True)
             if bundle.digest != current_build_id(model_name):
                 return Rebuild("sources changed", False)
-            read_bundle(zf)  # its files are those the digest stands for
+            inspect(zf, key)  # its names, its description, its files those of its digest
             root = parse_safe_xml(zf.read("modelDescription.xml"), "modelDescription.xml")
             check_description(bundle, model_name, root.get("version"), root.get("guid"))
             names = set(zf.namelist())

@@ -136,7 +136,7 @@ def read_bundle(zf: zipfile.ZipFile) -> Bundle | None:
     files = {}
     for name in zf.namelist():
         inner = name[len(RESOURCES):]
-        if name.startswith(RESOURCES) and not name.endswith("/") and (
+        if name.startswith(RESOURCES) and not name.endswith("/") and not _is_bytecode(inner) and (
                 inner.startswith((package + "/", PYTHONFMU)) or inner in (script, SLAVE_MODULE)):
             files[inner] = zf.read(name)
     if script not in files:

@@ -7,22 +7,17 @@ from __future__ import annotations
 
 import atexit
 import ctypes
-import errno
-import hashlib
-import io
 import os
-import shutil
 import sys
-import tempfile
 import time
-import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from fmpy import platform as fmpy_platform, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave, fmi2Real, fmi2ValueReference
+
+from .archive import load_fmu
 
 FMI2_WARNING = 1  # fmi2Status: a call returning more than fmi2Warning failed
 
@@ -76,136 +71,6 @@ def release_pythonfmu_states() -> int:
 
 
 atexit.register(release_pythonfmu_states)
-
-MAX_FMU_UNPACKED_BYTES = 1 << 30  # an FMU's files together, as its zip directory declares them
-MAX_MEMBER_NAME_BYTES = 1024      # a member's name in the zip; a part of it at most NAME_MAX
-NAME_MAX = 255                    # bytes in one file or folder name (Linux, most file systems)
-_loaded: dict[str, tuple[str, object]] = {}  # sha256 of an FMU file -> (folder, description)
-
-
-class FmuRefused(ValueError):
-    """An FMU file that is not loaded: its names, its size or its bundled code are not allowed
-    (the message says which and what is allowed; the caller names the file)."""
-
-
-def _remove_extracted() -> None:
-    for folder, _ in _loaded.values():
-        shutil.rmtree(folder, ignore_errors=True)
-    _loaded.clear()
-
-
-atexit.register(_remove_extracted)
-
-
-def _shortened(text: str, keep: int = 60) -> str:
-    return text if len(text) <= keep else f"{text[:keep // 2]}...{text[-keep // 2:]}"
-
-
-def fmu_file_problem(path: Path) -> str | None:
-    """Why `path` names no FMU file that can be read (a sentence naming it), or None."""
-    try:
-        return None if Path(path).is_file() else f"no FMU file at {path}"
-    except OSError as err:
-        if err.errno != errno.ENAMETOOLONG:
-            return f"cannot read the FMU file {_shortened(str(path))}: {err.strerror}"
-    longest = max(Path(path).parts, key=lambda part: len(os.fsencode(part)))
-    return (f"the FMU file name {_shortened(str(path))} is too long for the file system: a "
-            f"file or folder name may have at most {NAME_MAX} bytes and a path "
-            f"{os.pathconf('/', 'PC_PATH_MAX')}; this one has a name of "
-            f"{len(os.fsencode(longest))} bytes in a path of {len(os.fsencode(str(path)))}")
-
-
-def _member_problem(name: str) -> str | None:
-    """What is wrong with a zip member's name, or None: a relative path with forward slashes,
-    each part a plain name (not '', '.' or '..'), no drive, short enough to unpack anywhere."""
-    parts = name.rstrip("/").split("/")
-    if name.startswith("/") or "\\" in name or ":" in name or "\0" in name:
-        return "an absolute name, a backslash, a drive or device colon or a NUL"
-    if any(part in ("", ".", "..") for part in parts):
-        return "an empty, '.' or '..' part"
-    if len(name.encode()) > MAX_MEMBER_NAME_BYTES or \
-            max(len(part.encode()) for part in parts) > NAME_MAX:
-        return (f"a name longer than {MAX_MEMBER_NAME_BYTES} bytes or with a part longer than "
-                f"{NAME_MAX} bytes")
-    return None
-
-
-def check_members(zf: zipfile.ZipFile) -> None:
-    """Refuse an FMU whose zip has a member that could be unpacked outside its folder, or could
-    not be unpacked, or that declares more than MAX_FMU_UNPACKED_BYTES in all."""
-    for info in zf.infolist():
-        problem = _member_problem(info.filename)
-        if problem is not None:
-            raise FmuRefused(f"zip member {_shortened(info.filename)!r} has {problem}; allowed "
-                             "are relative paths of plain names joined by '/' (FMI 2.0, 2.1)")
-    size = sum(i.file_size for i in zf.infolist())
-    if size > MAX_FMU_UNPACKED_BYTES:
-        raise FmuRefused(f"its files unpack to {size} bytes, more than the limit of "
-                         f"{MAX_FMU_UNPACKED_BYTES} bytes")
-
-
-def _needed(name: str) -> bool:
-    """The members a co-simulation here uses: the description, this platform's binaries, the
-    resources (not the documentation, the sources, other platforms' binaries)."""
-    return name == "modelDescription.xml" or name.startswith(
-        ("resources/", f"binaries/{fmpy_platform}/"))
-
-
-def _unpack(zf: zipfile.ZipFile) -> str:
-    folder = tempfile.mkdtemp(prefix="crankfmu-fmu-")
-    try:
-        for info in zf.infolist():
-            if info.is_dir() or not _needed(info.filename):
-                continue
-            target = os.path.join(folder, *info.filename.split("/"))
-            os.makedirs(os.path.dirname(target), exist_ok=True)
-            with zf.open(info) as src, open(target, "wb") as dst:
-                shutil.copyfileobj(src, dst, 1 << 20)
-    except BaseException:
-        shutil.rmtree(folder, ignore_errors=True)
-        raise
-    return folder
-
-
-def load_fmu(path: Path) -> tuple[str, object]:
-    """(unpacked folder, model description) of the FMU file at `path`, checked, once per FMU
-    content for the life of the process (the folder is private, mkdtemp: mode 0700, and removed
-    at exit). Refused (FmuRefused, a ValueError) before anything is unpacked: member names that
-    are not plain relative paths, a DOCTYPE in modelDescription.xml, more than the size limits,
-    bundled crankfmu code that is not what its digest stands for, a GUID that is not its
-    build's (fmu/bundle.py). Unpacking an FMU once per process (not once per run) means its
-    binary is loaded once: a shared library is never unloaded here (see
-    FmuInstance.terminate), so a new copy per run would grow the process by the library's size
-    on every run."""
-    from .bundle import BundleError, check_description, read_bundle
-
-    if Path(path).stat().st_size > MAX_FMU_UNPACKED_BYTES:
-        raise FmuRefused(f"larger than the limit of {MAX_FMU_UNPACKED_BYTES} bytes")
-    data = Path(path).read_bytes()
-    key = hashlib.sha256(data).hexdigest()
-    if key in _loaded and os.path.isdir(_loaded[key][0]):
-        return _loaded[key]
-    with zipfile.ZipFile(io.BytesIO(data)) as zf:
-        check_members(zf)
-        check_model_description_xml(zf)
-        try:
-            bundle = read_bundle(zf)
-        except BundleError as err:
-            raise FmuRefused(str(err)) from None
-        folder = _unpack(zf)
-    try:
-        description = read_model_description(os.path.join(folder, "modelDescription.xml"))
-        if bundle is not None:
-            check_description(bundle, description.modelName, description.version,
-                              description.guid)
-    except BaseException as err:
-        shutil.rmtree(folder, ignore_errors=True)
-        if isinstance(err, BundleError):
-            raise FmuRefused(str(err)) from None
-        raise
-    _loaded[key] = folder, description
-    return _loaded[key]
-
 
 @dataclass
 class StepStatistics:
@@ -324,45 +189,6 @@ class FmuInstance:
 
     def free_state(self, state) -> None:
         self.slave.freeFMUState(state)
-
-
-def check_model_description_xml(fmu) -> None:
-    """Refuse a modelDescription.xml that a safe parser would not read (fmpy parses it with
-    lxml's defaults, which resolve entities): no DTD, no entities, well-formed, < 64 MiB.
-    `fmu`: the FMU's path or its open zip."""
-    if not isinstance(fmu, zipfile.ZipFile):
-        with zipfile.ZipFile(fmu) as zf:
-            return check_model_description_xml(zf)
-    try:
-        info = fmu.getinfo("modelDescription.xml")
-    except KeyError:
-        raise ValueError("no modelDescription.xml in the FMU") from None
-    if info.file_size > 64 << 20:
-        raise ValueError(f"modelDescription.xml declares {info.file_size} bytes")
-    with fmu.open(info) as f:
-        parse_safe_xml(f.read(64 << 20), "modelDescription.xml")
-
-
-def parse_safe_xml(data: bytes, what: str):
-    """An XML document parsed without DTD, entities or network access; a document that holds
-    a DOCTYPE is refused (ValueError naming `what`)."""
-    from lxml import etree
-    parser = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False,
-                             dtd_validation=False, huge_tree=False, remove_comments=False)
-    try:
-        root = etree.fromstring(data, parser)
-    except etree.XMLSyntaxError as err:
-        raise UnsafeXml(f"{what} line {err.lineno}", f"not well-formed XML: {err.msg}") from None
-    tree = root.getroottree()
-    if tree.docinfo.doctype or tree.docinfo.internalDTD is not None:
-        raise UnsafeXml(what, "a DOCTYPE (DTD, entities) is not allowed")
-    return root
-
-
-class UnsafeXml(ValueError):
-    def __init__(self, where: str, message: str):
-        self.where, self.message = where, message
-        super().__init__(f"{where}: {message}")
 
 
 class LogCollector:

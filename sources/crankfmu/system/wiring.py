@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from .scene import Scene, SceneError
-from ..fmu.instance import FmuInstance, fmu_file_problem
+from ..fmu.archive import fmu_file_problem
+from ..fmu.instance import FmuInstance
 
 log = logging.getLogger(__name__)
 
