@@ -15,15 +15,9 @@ bytes, so two builds on one machine give byte-identical FMUs.
 from __future__ import annotations
 
 import functools
-import html
 import os
-import shlex
-import shutil
-import subprocess
 import sys
-import sysconfig
-import tempfile
-from pathlib import Path
+from pathlib import Path  # the rest is imported where used: a run checks an FMU's build id only
 
 SOURCE = Path(__file__).resolve().parent / "launcher.c"
 CONFIG_NAME = "crankfmu_launcher.txt"
@@ -41,6 +35,8 @@ TESTED_HOSTS = (
 
 def find_compiler() -> list[str] | None:
     """$CC (split like a shell), else the first of cc, gcc, clang on PATH; None if none runs."""
+    import shlex
+    import shutil
     if os.environ.get("CC"):
         cmd = shlex.split(os.environ["CC"])
         return cmd if shutil.which(cmd[0]) else None
@@ -52,6 +48,8 @@ def find_compiler() -> list[str] | None:
 
 @functools.lru_cache(maxsize=4)
 def _compile(compiler: tuple[str, ...], source: bytes) -> bytes:
+    import subprocess
+    import tempfile
     with tempfile.TemporaryDirectory(prefix="crankfmu_launcher_") as tmp:
         (Path(tmp) / "launcher.c").write_bytes(source)
         cmd = [*compiler, *FLAGS, "-o", "launcher.so", "launcher.c", "-ldl", "-lpthread"]
@@ -80,6 +78,7 @@ def compile_launcher() -> bytes | None:
 def libpython_path() -> str:
     """This Python's shared libpython, or '' (a static build: the launcher then searches the
     loader's path for libpython<version>.so.1.0)."""
+    import sysconfig
     cfg = sysconfig.get_config_var
     for folder in dict.fromkeys(filter(None, [cfg("LIBDIR"), cfg("LIBPL")])):
         for name in filter(None, [cfg("INSTSONAME"), cfg("LDLIBRARY")]):
@@ -92,6 +91,7 @@ def libpython_path() -> str:
 
 def launcher_config(model_identifier: str) -> bytes:
     """resources/crankfmu_launcher.txt: what the launcher reads at fmi2Instantiate."""
+    import sysconfig
     version = sysconfig.get_config_var("py_version_short") or \
         f"{sys.version_info[0]}.{sys.version_info[1]}"
     lines = [
@@ -121,6 +121,7 @@ def package_binary(entries: dict[str, bytes], model_identifier: str,
 
 def hosting_html(launcher: bool) -> str:
     """The model card's section "Using the FMUs in other tools"."""
+    import html
     version = f"{sys.version_info[0]}.{sys.version_info[1]}"
     env = html.escape(sys.executable)
     req = ", ".join(REQUIRES)

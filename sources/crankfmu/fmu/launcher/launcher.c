@@ -12,8 +12,10 @@
  *      the environment, CRANKFMU_LIBPYTHON the library. The interpreter started here is never
  *      finalized (a host may still run FMU code in its own exit handlers).
  *   2. Pre-flight: before the first instance, the packages the runtime needs (numpy, scipy) are
- *      imported; if one is missing, fmi2Instantiate returns NULL and logs what is missing, in
- *      which Python, and how to point the FMU at another environment.
+ *      looked up (importlib.util.find_spec: found, not imported; scipy is off the default path,
+ *      and importing it cost every process ~10 ms); if one is missing, fmi2Instantiate returns
+ *      NULL and logs what is missing, in which Python, and how to point the FMU at another
+ *      environment.
  *   3. Forwarding: every fmi2 function goes to the pythonfmu binary. The launcher keeps a small
  *      instance record around pythonfmu's component:
  *      - logging: pythonfmu logs nothing unless loggingOn; the launcher instantiates it with
@@ -85,7 +87,7 @@ typedef struct {
     char python[TEXT];      /* the environment's python executable */
     char libpython[TEXT];   /* its libpython (sysconfig LIBDIR/LDLIBRARY) */
     char version[32];       /* e.g. 3.11 */
-    char requires[TEXT];    /* packages imported before the first instance, space separated */
+    char requires[TEXT];    /* packages looked up before the first instance, space separated */
 } Config;
 
 /* ---- Python C API, looked up at run time ---------------------------------------------------- */
@@ -348,14 +350,16 @@ static int ensure_python(const Config *cfg, char *error, size_t size) {
     return 1;
 }
 
-/* Import the packages the runtime needs; on failure write what is missing into `error`. */
+/* Find the packages the runtime needs; on failure write what is missing into `error`. */
 static int preflight(const Config *cfg, char *error, size_t size) {
     static const char code[] =
         "import sys\n"
+        "from importlib.util import find_spec\n"
         "missing = []\n"
         "for name in requires.split():\n"
         "    try:\n"
-        "        __import__(name)\n"
+        "        if find_spec(name) is None:\n"
+        "            missing.append(f'{name} (ModuleNotFoundError: No module named {name!r})')\n"
         "    except Exception as err:\n"
         "        missing.append(f'{name} ({type(err).__name__}: {err})')\n"
         "message = ''\n"
