@@ -298,10 +298,22 @@ def _command_named(argv: list[str]) -> str | None:
     return words[0] if words and words[0] in known else None
 
 
+def _skip_final_collection() -> None:
+    """At exit the interpreter's last garbage collections walk every object of numpy, fmpy and
+    the FMUs' runtimes: ~35 ms of a short run's ~0.3 s of CPU (measured). Objects frozen by an
+    exit handler (gc.freeze; exit handlers run before the interpreter's teardown) are not
+    walked; the process's memory goes back to the system at its end in any case."""
+    import atexit
+    import gc
+    atexit.unregister(gc.freeze)  # once, however often main runs in a process
+    atexit.register(gc.freeze)
+
+
 def main(argv=None) -> int:
     """Exit status 0, 2 for every crankfmu error (`crankfmu.errors.CrankfmuError`: a bad scene,
     option or archive, a failed run), 130 for Ctrl-C; no traceback for anything a user can do."""
     from .errors import CrankfmuError
+    _skip_final_collection()
     try:
         argv = sys.argv[1:] if argv is None else list(argv)
         parser = build_parser(_command_named(argv))
