@@ -9,8 +9,9 @@ folder named by the SHA-256 of the FMU file in the user's cache (`cache_dir`): a
 finds it there and unpacks nothing. A changed FMU file has another hash, so it can never meet
 the files of an earlier content; a folder is written under a temporary name and renamed when
 whole, so processes that unpack the same FMU at once each see a whole folder (the first rename
-wins); a cached folder is checked against the zip (file set, sizes, CRC-32) before each use and
-unpacked again when it differs. Without a usable cache (CRANKFMU_CACHE_DIR set to "", a folder
+wins); a cached folder is checked before each use against the manifest written with it (the
+members' files, their sizes and modification times) and unpacked again when it differs, and
+removed when unused for CACHE_KEEP_SECONDS. Without a usable cache (CRANKFMU_CACHE_DIR set to "", a folder
 that is not this user's alone) each process unpacks into a private temporary folder, removed at
 exit. Within a process an FMU content is unpacked and loaded once: a shared library is never
 unloaded here (see FmuInstance.terminate), so a new copy per run would grow the process by the
@@ -142,7 +143,7 @@ def read_fmu(path: Path) -> tuple[bytes, str]:
     return data, hashlib.sha256(data).hexdigest()
 
 
-def inspect(zf: zipfile.ZipFile, key: str):
+def inspect_fmu(zf: zipfile.ZipFile, key: str):
     """Check an FMU (its open zip; `key`, its content's SHA-256) before anything is unpacked:
     member names and sizes (check_members), modelDescription.xml (check_model_description_xml)
     and its crankfmu bundle against its digest (fmu/bundle.py read_bundle); returns the bundle,
@@ -190,7 +191,7 @@ def cache_dir() -> Path | None:
     $XDG_CACHE_HOME/crankfmu/fmus, else ~/.cache/crankfmu/fmus (made with mode 0700). None when
     the variable is set to "" or the folder cannot be made or is not this user's alone."""
     setting = os.environ.get(CACHE_ENV)
-    if setting == "":
+    if setting == "" or not hasattr(os, "getuid"):  # the ownership check below is POSIX's
         return None
     if setting is None:
         base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
@@ -294,7 +295,7 @@ def load_fmu(path: Path) -> tuple[str, object]:
         _touch(_loaded[key][0])
         return _loaded[key]
     with zipfile.ZipFile(io.BytesIO(data)) as zf:
-        bundle = inspect(zf, key)
+        bundle = inspect_fmu(zf, key)
         members = _needed(zf)
         root = cache_dir()
         try:

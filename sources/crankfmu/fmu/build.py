@@ -162,7 +162,7 @@ def model_card_html(model_name: str) -> str:
             f"<th>range</th><th>description</th></tr>{''.join(rows)}</table></body></html>")
 
 
-def repack(built: Path, target: Path, slave_class, digest: str, rendered: dict[str, bytes],
+def _repack(built: Path, target: Path, slave_class, digest: str, rendered: dict[str, bytes],
            card: str | None = None) -> None:
     """Rewrite pythonfmu's zip into `target`: our modelDescription, the bundle's bytecode, the
     native launcher, the model card `card` (if any), fixed timestamps. Written atomically."""
@@ -224,7 +224,7 @@ def _build(dest: Path, marked: dict[str, bytes], class_name: str, digest: str,
             built = FmuBuilder.build_FMU(script, dest=tmp / "out", project_files=[package])
             slave_class = getattr(sys.modules[script.stem], class_name)
             target = dest / f"{class_name}.fmu"
-            repack(built, target, slave_class, digest, render(marked, digest), card)
+            _repack(built, target, slave_class, digest, render(marked, digest), card)
         finally:
             sys.path.remove(str(tmp))
             for name in [m for m in sys.modules if digest in m and m not in loaded_before]:
@@ -252,7 +252,7 @@ def rebuild_reason(path: Path, model_name: str) -> Rebuild | None:
     build and this platform's binaries. Otherwise why it must be built."""
     from fmpy import platform, sharedLibraryExtension
 
-    from .archive import inspect, parse_safe_xml, read_fmu
+    from .archive import inspect_fmu, parse_safe_xml, read_fmu
     if not path.is_file():
         return Rebuild("FMU missing", False)
     binary = f"binaries/{platform}/{model_name}{sharedLibraryExtension}"
@@ -264,7 +264,7 @@ def rebuild_reason(path: Path, model_name: str) -> Rebuild | None:
                 return Rebuild("not a crankfmu build: no bundled crankfmu package", True)
             if bundle.digest != current_build_id(model_name):
                 return Rebuild("sources changed", False)
-            inspect(zf, key)  # its names, its description, its files those of its digest
+            inspect_fmu(zf, key)  # names, description, and files those of its digest
             root = parse_safe_xml(zf.read("modelDescription.xml"), "modelDescription.xml")
             check_description(bundle, model_name, root.get("version"), root.get("guid"))
             names = set(zf.namelist())

@@ -89,7 +89,7 @@ def bytecode(files: dict[str, bytes]) -> dict[str, bytes]:
         path = PurePosixPath(name)
         if path.suffix != ".py" or _is_bytecode(name):
             continue
-        code = compile(source, name, "exec", dont_inherit=True)
+        code = compile(source, name, "exec", dont_inherit=True, optimize=0)  # the plain .pyc
         header = importlib.util.MAGIC_NUMBER + (0b11).to_bytes(4, "little")  # hash, checked
         pyc = path.parent / "__pycache__" / f"{path.stem}.{sys.implementation.cache_tag}.pyc"
         out[str(pyc)] = header + importlib.util.source_hash(source) + marshal.dumps(code, 2)
