@@ -143,13 +143,17 @@ def _worker_dir() -> Path:
 def _start_worker(lifeline) -> None:
     """A pool worker's initializer. It imports what a run needs, as the pool starts (beside the
     parent's own preparation, not after it); it skips the last garbage collections at exit
-    (gc.freeze, as crankfmu.cli does: the parent waits for its workers to end); and it ends
-    this worker with its parent (_end_with_parent)."""
+    (gc.freeze, as crankfmu.cli does: the parent waits for its workers to end); it ends this
+    worker with its parent (_end_with_parent), and on SIGTERM (what the pool sends the other
+    workers when one died) with its temporary folders."""
     import atexit
     import gc
+    import signal
 
     import crankfmu.cosim.runner  # noqa: F401 - fmpy, lxml, the masters, the wiring
     atexit.register(gc.freeze)
+    signal.signal(signal.SIGTERM, lambda signum, frame: threading.Thread(
+        target=_leave, args=(128 + signum,), daemon=True).start())  # the lock may be held here
     _end_with_parent(lifeline)
 
 
@@ -157,22 +161,26 @@ def _end_with_parent(lifeline) -> None:
     """A thread that waits on `lifeline` (the read end of a pipe whose only write end the
     parent holds, and nobody writes to) and ends this worker when the pipe closes: when the
     parent ends, however it ends (kill -9 included: the kernel closes its files), or when it
-    closes the pool. The worker's temporary folders go with it (os._exit runs no exit
-    handler). Without it, a sweep killed with kill -9 left its workers waiting on their task
-    queue for good, and with them the resource tracker that multiprocessing starts for the
-    pool's queues (it ends when the last process holding its pipe ends)."""
+    closes the pool. Without it, a sweep killed with kill -9 left its workers waiting on their
+    task queue for good, and with them the resource tracker that multiprocessing starts for
+    the pool's queues (it ends when the last process holding its pipe ends)."""
     def watch() -> None:
         try:
             lifeline.recv_bytes()
         except (EOFError, OSError):
             pass
-        from ..fmu.archive import remove_tree, remove_unpacked
-        _WORKER_DIR_LOCK.acquire()  # kept: no folder is made after this
-        if _WORKER_DIR is not None:
-            remove_tree(_WORKER_DIR)
-        remove_unpacked(for_good=True)
-        os._exit(0)
+        _leave(0)
     threading.Thread(target=watch, name="crankfmu-parent-watch", daemon=True).start()
+
+
+def _leave(status: int) -> None:
+    """End this worker now, with its temporary folders (os._exit runs no exit handler)."""
+    from ..fmu.archive import remove_tree, remove_unpacked
+    _WORKER_DIR_LOCK.acquire()  # kept: no folder is made after this
+    if _WORKER_DIR is not None:
+        remove_tree(_WORKER_DIR)
+    remove_unpacked(for_good=True)
+    os._exit(status)
 
 
 def _ready() -> None:
