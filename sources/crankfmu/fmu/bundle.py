@@ -6,15 +6,16 @@ resources/slavemodule.txt names for pythonfmu's binary, and pythonfmu's Python p
 first FMU loaded in a process provides it to all). All Python FMUs in a process share one
 sys.modules, where a module is known by its name alone: the first FMU to import a name decides
 the code every later FMU gets under it. So a name must stand for one content. The digest is a
-hash of every file of the bundle (those four) with the digest
-itself written as MARK wherever it occurs (a hash cannot contain itself); `read_bundle`
-recomputes it from an FMU's files before the FMU is loaded, so an FMU changed after its build
-(a patched model, a half-written copy) is refused instead of sharing, or replacing, the code of
-another FMU of the same name and build.
+hash of every file of the bundle (those four) with the digest itself written as MARK wherever it
+occurs (a hash cannot contain itself); `read_bundle` recomputes it from an FMU's files before
+the FMU is loaded, so an FMU changed after its build (a patched model, a half-written copy) is
+refused instead of sharing, or replacing, the code of another FMU of the same name and build.
 
 Bytecode: each module's `__pycache__/<module>.<tag>.pyc` is derived from its source and not
 hashed. It is a checked-hash pyc (PEP 552): Python compares the source's hash recorded in it
-with the source before using it, so a pyc never runs for another source than its own.
+with the source before using it, so a stale pyc is never run. (A pyc made on purpose to carry
+other code under a source's hash would be: the digest guards against changed FMUs, not against
+forged bytecode.)
 """
 from __future__ import annotations
 
@@ -30,7 +31,6 @@ from pathlib import PurePosixPath
 
 PACKAGE_PREFIX = "crankfmu_rt_"
 MARK = "<digest>"  # the digest's place in the hashed text
-DIGEST = re.compile(r"[0-9a-f]{12}")
 ENTRY_MODULE = re.compile(r"crankfmu_([0-9a-f]{12})_([A-Za-z_][A-Za-z0-9_]*)")
 RESOURCES = "resources/"
 SLAVE_MODULE = "slavemodule.txt"  # pythonfmu's binary imports the module named here

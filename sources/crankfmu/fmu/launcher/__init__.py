@@ -17,7 +17,7 @@ from __future__ import annotations
 import functools
 import os
 import sys
-from pathlib import Path  # the rest is imported where used: a run checks an FMU's build id only
+from pathlib import Path  # the others where used: a run reads SOURCE and CONFIG_NAME only
 
 SOURCE = Path(__file__).resolve().parent / "launcher.c"
 CONFIG_NAME = "crankfmu_launcher.txt"
