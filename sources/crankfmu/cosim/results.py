@@ -96,7 +96,8 @@ def _version(package: str) -> str | None:
     if spec is None or spec.origin is None:
         return None
     site = Path(spec.origin).parents[1]
-    infos = [n for n in os.listdir(site) if n.startswith(f"{package}-") and n.endswith(".dist-info")]
+    infos = [n for n in os.listdir(site)
+             if n.startswith(f"{package}-") and n.endswith(".dist-info")]
     if len(infos) == 1:
         return infos[0][len(package) + 1:-len(".dist-info")]
     from importlib import metadata

@@ -2,20 +2,20 @@
 
 `load_fmu` refuses, before anything is unpacked, what could escape or overflow the folder it is
 unpacked into (zip member names that are not plain relative paths, sizes over the limits), a
-modelDescription.xml that a safe parser would not read, and crankfmu FMUs whose bundled code is
-not what its digest stands for or whose GUID is not its build's (fmu/bundle.py). It unpacks what
-a co-simulation here uses (the description, this platform's binaries, the resources) into a
-folder named by the SHA-256 of the FMU file in the user's cache (`cache_dir`): a later process
-finds it there and unpacks nothing. A changed FMU file has another hash, so it can never meet
-the files of an earlier content; a folder is written under a temporary name and renamed when
-whole, so processes that unpack the same FMU at once each see a whole folder (the first rename
-wins); a cached folder is checked before each use against the manifest written with it (the
-members' files, their sizes and modification times) and unpacked again when it differs, and
-removed when unused for CACHE_KEEP_SECONDS. Without a usable cache (CRANKFMU_CACHE_DIR set to "", a folder
-that is not this user's alone) each process unpacks into a private temporary folder, removed at
-exit. Within a process an FMU content is unpacked and loaded once: a shared library is never
-unloaded here (see FmuInstance.terminate), so a new copy per run would grow the process by the
-library's size on every run.
+modelDescription.xml that a safe parser would not read, and crankfmu FMUs whose bundled code is not
+what its digest stands for or whose GUID is not its build's (fmu/bundle.py). It unpacks what a
+co-simulation here uses (the description, this platform's binaries, the resources) into a folder
+named by the SHA-256 of the FMU file in the user's cache (`cache_dir`): a later process finds it
+there and unpacks nothing. A changed FMU file has another hash, so it can never meet the files of an
+earlier content; a folder is written under a temporary name and renamed when whole, so processes
+that unpack the same FMU at once each see a whole folder (the first rename wins); a cached folder is
+checked before each use against the manifest written with it (the members' files, their sizes and
+modification times) and unpacked again when it differs, and removed when unused for
+CACHE_KEEP_SECONDS. Without a usable cache (CRANKFMU_CACHE_DIR set to "", a folder that is not this
+user's alone) each process unpacks into a private temporary folder, removed at exit. Within a
+process an FMU content is unpacked and loaded once: a shared library is never unloaded here (see
+FmuInstance.terminate), so a new copy per run would grow the process by the library's size on every
+run.
 """
 from __future__ import annotations
 
