@@ -95,8 +95,8 @@ def test_an_edit_to_one_model_changes_only_its_build_id(tmp_path, monkeypatch):
 
 
 # -- cached catalog FMUs (issue #27) -------------------------------------------------------------
-def _run_servo_press(fmus: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "crankfmu", "run", str(SERVO_PRESS),
+def _run_servo_press(fmus: Path, scene: Path = SERVO_PRESS) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "crankfmu", "run", str(scene),
                            "--stop-time", "0.002", "--no-estimate", "--fmus", str(fmus),
                            "--out", str(fmus / "run.csv")],
                           capture_output=True, text=True, timeout=300)
@@ -116,26 +116,38 @@ def _without_binaries(data: bytes) -> bytes:
     return out.getvalue()
 
 
+@pytest.mark.parametrize("fmi", [2, 3])
 @pytest.mark.parametrize("damage, words", [
     (_truncated, "damaged: File is not a zip file"),
-    (_without_binaries, "incomplete: no binaries/linux64/DcServoMotor.so"),
+    (_without_binaries, "incomplete: no binaries/{platform}/DcServoMotor.so"),
 ])
-def test_a_damaged_cached_fmu_is_rebuilt_with_a_notice(fmu_dir, tmp_path, damage, words):
+def test_a_damaged_cached_fmu_is_rebuilt_with_a_notice(fmu_dir, fmi3_dir, tmp_path, damage,
+                                                       words, fmi):
     """Before: a truncated DcServoMotor.fmu in the FMU folder was rebuilt with the note
     "sources changed"; one without binaries/ (the build's modelDescription intact) was reused
     and failed with fmpy's raw "Cannot find shared library" and a traceback. Now both are built
-    again, with one warning line that says why, and the run completes."""
+    again, with one warning line that says why, and the run completes. The same for the FMI
+    3.0 motor in fmus/fmi3/ (a scene with fmi = 3; before the FMI 3.0 build shared the check,
+    the truncated file was rebuilt without a notice, and the one without binaries reused and
+    refused by fmpy)."""
     for name in ("DcServoMotor", "StephensonPress"):
         shutil.copy(fmu_dir / f"{name}.fmu", tmp_path / f"{name}.fmu")
-    motor = tmp_path / "DcServoMotor.fmu"
-    motor.write_bytes(damage(motor.read_bytes()))
-    done = _run_servo_press(tmp_path)
+    scene, motor, genuine = SERVO_PRESS, tmp_path / "DcServoMotor.fmu", fmu_dir / "DcServoMotor.fmu"
+    if fmi == 3:
+        scene = tmp_path / "servo_press_fmi3.toml"
+        scene.write_text(SERVO_PRESS.read_text().replace('fmu = "DcServoMotor"',
+                                                         'fmu = "DcServoMotor"\nfmi = 3'))
+        motor, genuine = tmp_path / "fmi3" / "DcServoMotor.fmu", fmi3_dir / "DcServoMotor.fmu"
+        motor.parent.mkdir()
+    motor.write_bytes(damage(genuine.read_bytes()))
+    done = _run_servo_press(tmp_path, scene)
     assert done.returncode == 0, done.stderr[-3000:]
     notices = [line for line in done.stderr.splitlines() if "DcServoMotor.fmu" in line]
+    words = words.format(platform={2: "linux64", 3: "x86_64-linux"}[fmi])
     assert len(notices) == 1 and notices[0].startswith("warning: building") \
-        and words in notices[0], done.stderr
+        and words in notices[0] and str(motor) in notices[0], done.stderr
     assert "StephensonPress" not in done.stderr  # the whole one is used as it is
-    assert motor.read_bytes() == (fmu_dir / "DcServoMotor.fmu").read_bytes()
+    assert motor.read_bytes() == genuine.read_bytes()
 
 
 def test_a_cached_fmu_of_other_sources_is_rebuilt_quietly_and_a_whole_one_used(fmu_dir,
@@ -173,10 +185,13 @@ def test_an_interrupted_build_leaves_the_earlier_file_and_no_part(fmu_dir, tmp_p
     assert Path(target).read_bytes() == before
 
 
-def test_the_bundled_code_loads_from_its_bytecode_without_compiling(fmu_dir):
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_the_bundled_code_loads_from_its_bytecode_without_compiling(fmu_dir, fmi3_dir, fmi):
     """Before: every load compiled the FMU's bundled sources (no bytecode in the FMU; a fresh
     folder per process). Now the FMU carries checked-hash pycs of its package, entry script and
-    pythonfmu, used even where bytecode is not written (PYTHONDONTWRITEBYTECODE)."""
+    pythonfmu (FMI 3.0: pythonfmu3), used even where bytecode is not written
+    (PYTHONDONTWRITEBYTECODE)."""
+    fmu = (fmu_dir if fmi == 2 else fmi3_dir) / "StephensonPress.fmu"
     script = (
         "import importlib._bootstrap_external as ext, sys\n"
         "compiled = []\n"
@@ -185,8 +200,8 @@ def test_the_bundled_code_loads_from_its_bytecode_without_compiling(fmu_dir):
         "    compiled.append(str(path))\n"
         "    return original(self, data, path, _optimize=_optimize)\n"
         "ext.SourceLoader.source_to_code = recorded\n"
-        "from crankfmu.fmu.instance import FmuInstance\n"
-        f"fmu = FmuInstance('m', {str(fmu_dir / 'StephensonPress.fmu')!r})\n"
+        "from crankfmu.fmu.instance3 import open_fmu\n"
+        f"fmu = open_fmu('m', {str(fmu)!r})\n"
         "fmu.instantiate()\n"
         "fmu.terminate()\n"
         "bundled = [p for p in compiled if fmu.unzip_dir in p]\n"

@@ -64,12 +64,12 @@ def run_in_fresh_process(fmus: list[tuple[str, Path]]) -> dict:
     script = (
         "import json, sys\n"
         "from crankfmu.fmu.archive import FmuRefused\n"
-        "from crankfmu.fmu.instance import FmuInstance\n"
+        "from crankfmu.fmu.instance3 import open_fmu\n"
         "from tests.support.importer_support import step_together\n"
         "specs, refused = [], {}\n"
         "for n, p in json.loads(sys.argv[1]):\n"
         "    try:\n"
-        "        FmuInstance(n, p)\n"
+        "        open_fmu(n, p)\n"
         "        specs.append((n, p, None))\n"
         "    except FmuRefused as err:\n"
         "        refused[n] = str(err)\n"
@@ -154,14 +154,17 @@ def patched_copy(fmu: Path, dest: Path) -> Path:
     return dest
 
 
+@pytest.mark.parametrize("fmi", [2, 3])
 @pytest.mark.parametrize("order", ["patched first", "genuine first"])
-def test_a_patched_fmu_is_refused_and_never_lends_its_code(catalog, tmp_path, order):
+def test_a_patched_fmu_is_refused_and_never_lends_its_code(catalog, fmi3_dir, tmp_path, order,
+                                                           fmi):
     """Issue #27: a DcServoMotor patched by hand keeps its names (model, build id, package), so
     in one process whichever loaded first decided the code of both: before, loaded first it
     gave the genuine FMU its flange_J + 1 kg.m2 (and in the servo press, press.phi 9.682
     instead of 4.839 rad at 0.3 s). Now the patched file is refused, naming what is wrong, and
-    the genuine one runs its own code."""
-    genuine = catalog["DcServoMotor"]
+    the genuine one runs its own code. The same for the FMI 3.0 FMU (before its loader shared
+    the check: loaded, and the code of whichever was instantiated first ran in both)."""
+    genuine = catalog["DcServoMotor"] if fmi == 2 else fmi3_dir / "DcServoMotor.fmu"
     patched = patched_copy(genuine, tmp_path / "patched" / "DcServoMotor.fmu")
     fmus = [("B", patched), ("A", genuine)]
     result = run_in_fresh_process(fmus if order == "patched first" else fmus[::-1])
