@@ -125,39 +125,26 @@ def build_script_fmu(dest: Path, name: str, template: str, runtime: bool = True,
     """An FMU `name` from an entry-script template (formatted with digest, name and `fields`),
     with crankfmu's runtime bundled (runtime=True) and its modelDescription, or as pythonfmu
     writes it (runtime=False: a plain pythonfmu slave)."""
-    import zipfile
+    from crankfmu.fmu.build import build_bundle_fmu, bundle_sources
+    from crankfmu.fmu.bundle import MARK
 
+    if runtime:  # the digest is this bundle's: its names stand for its content (fmu/bundle.py)
+        model = fields.get("cls")  # a catalog model the script subclasses: bundled as well
+        script = template.format(digest=MARK, name=name, **fields)
+        return build_bundle_fmu(dest, bundle_sources(model, name, script), name)
     from pythonfmu.builder import FmuBuilder
-
-    from crankfmu.fmu.build import ZIP_DATE, _write_runtime, current_build_id
-    from crankfmu.fmu.model_description import model_description
-
-    model = fields.get("cls")  # a catalog model the script subclasses: bundled with the runtime
-    digest = current_build_id(model)
     dest.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="crankfmu_bench_") as tmp:
-        tmp = Path(tmp)
-        files = [_write_runtime(tmp, model, digest)] if runtime else []
-        script = tmp / f"crankfmu_{digest}_{name}.py"
-        script.write_text(template.format(digest=digest, name=name, **fields))
-        sys.path.insert(0, str(tmp))
+        script = Path(tmp) / f"{name}.py"
+        script.write_text(template.format(name=name, **fields))
         try:
-            built = FmuBuilder.build_FMU(script, dest=tmp / "out", project_files=files)
+            built = FmuBuilder.build_FMU(script, dest=Path(tmp) / "out")
             target = dest / f"{name}.fmu"
-            if not runtime:
-                target.write_bytes(built.read_bytes())
-                return target
-            slave_class = getattr(sys.modules[script.stem], name)
-            with zipfile.ZipFile(built) as z:
-                entries = {i.filename: z.read(i) for i in z.infolist() if not i.is_dir()}
-            entries["modelDescription.xml"] = model_description(slave_class, digest)
-            with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as z:
-                for entry in sorted(entries):
-                    z.writestr(zipfile.ZipInfo(entry, ZIP_DATE), entries[entry])
-        finally:
-            sys.path.remove(str(tmp))
-            for module in [m for m in sys.modules if digest in m]:
-                del sys.modules[module]
+            target.write_bytes(built.read_bytes())
+        finally:  # what the builder left: its folder on sys.path, the script imported from it
+            if tmp in sys.path:
+                sys.path.remove(tmp)
+            sys.modules.pop(name, None)
     return target
 
 

@@ -9,27 +9,37 @@ ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"
 
 
+def pytest_configure(config) -> None:
+    """The FMUs the tests load unpack into a cache of this test run (crankfmu.fmu.archive), not
+    the user's; the processes the tests start inherit it (xdist's workers: the controller's)."""
+    import os
+    import tempfile
+    if "CRANKFMU_CACHE_DIR" not in os.environ:
+        os.environ["CRANKFMU_CACHE_DIR"] = config._crankfmu_cache = tempfile.mkdtemp(
+            prefix="crankfmu-test-fmus-")
+
+
+def pytest_unconfigure(config) -> None:
+    import shutil
+    if getattr(config, "_crankfmu_cache", None):
+        shutil.rmtree(config._crankfmu_cache, ignore_errors=True)
+
+
 def pytest_sessionstart(session) -> None:
     """With pytest-xdist (pyproject.toml's addopts: one worker process per core, whole test files
     per worker), the controller brings the repository's fmus/ up to date before the workers
-    start. Scenes run without --fmus build their FMUs there on first use, and the build writes
-    the file in place: two workers meeting a missing FMU at once would build it together while
-    one of them reads it. Serially nothing changes: the first test that needs an FMU builds it."""
+    start. Scenes run without --fmus build their FMUs there on first use: two workers meeting a
+    missing FMU at once would both build it (each renames its own whole file over the target,
+    so readers are safe, but the work is done twice). Serially nothing changes: the first test
+    that needs an FMU builds it."""
     config = session.config
     if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
         return
-    from fmpy import read_model_description
-
-    from crankfmu.fmu.build import build_fmu, current_build_id
+    from crankfmu.fmu.build import build_fmu, rebuild_reason
     from crankfmu.models.catalog import FMU_MODELS
 
     for model in FMU_MODELS:
-        path = ROOT / "fmus" / f"{model}.fmu"
-        try:
-            current = read_model_description(str(path)).version
-        except Exception:  # missing or unreadable: built, as resolve_fmu would
-            current = None
-        if current != current_build_id(model):
+        if rebuild_reason(ROOT / "fmus" / f"{model}.fmu", model) is not None:  # as resolve_fmu
             build_fmu(model, ROOT / "fmus")
 
 

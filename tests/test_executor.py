@@ -104,3 +104,46 @@ def test_accuracy_and_compare_on_a_dask_cluster_equal_serial(fmu_dir, tmp_path):
     assert serial_cmp["text"] == dask_cmp["text"]
     assert (tmp_path / "cmp_serial" / "compare.csv").read_bytes() == \
         (tmp_path / "cmp_dask" / "compare.csv").read_bytes()
+
+
+def pid_and_worker_folder() -> tuple[int, str]:
+    """In a pool worker: its pid and its temporary folder (made now), after a pause so that
+    each of two such tasks lands on its own worker."""
+    import os
+    import time
+
+    from crankfmu.studies.executor import _worker_dir
+    folder = str(_worker_dir())
+    time.sleep(1.0)
+    return os.getpid(), folder
+
+
+def test_workers_that_the_pool_ends_remove_their_folders(tmp_path):
+    """When a worker dies (here SIGKILL), the pool ends the others with SIGTERM, whose default
+    action runs no exit handler: before, they left their temporary folders. Only the killed
+    worker's folder may remain."""
+    import os
+    import subprocess
+    import sys
+
+    from tests.conftest import ROOT
+    script = (
+        "import os, signal\n"
+        "from crankfmu.studies.executor import LocalPoolExecutor\n"
+        "from tests.test_executor import pid_and_worker_folder\n"
+        "pool = LocalPoolExecutor(2)\n"
+        "workers = [f.result() for f in [pool._pool.submit(pid_and_worker_folder)\n"
+        "                                for _ in range(2)]]\n"
+        "os.kill(workers[0][0], signal.SIGKILL)\n"
+        "try:\n"
+        "    pool._pool.submit(os.getpid).result()\n"
+        "except Exception as err:\n"
+        "    print(type(err).__name__)\n"
+        "pool.close()\n"
+        "print(workers[0][1])\n")
+    done = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True,
+                          text=True, timeout=120, env={**os.environ, "TMPDIR": str(tmp_path)})
+    assert done.returncode == 0, done.stderr[-3000:]
+    broken, killed = done.stdout.split()
+    assert broken == "BrokenProcessPool"
+    assert [str(p) for p in tmp_path.iterdir()] == [killed]

@@ -53,7 +53,7 @@ def test_entry_namespace_is_never_over_released(fmu_dir, model):
 
 
 def test_exit_release_reaches_every_loaded_copy_of_the_binary(fmu_dir):
-    """Each FMU content is unpacked once per process (crankfmu.fmu.instance.extract_fmu), so its
+    """Each FMU content is unpacked once per process (crankfmu.fmu.archive.load_fmu), so its
     binary is loaded once however many instances and runs use it; two FMUs are two copies. The
     atexit release must find each copy still loaded, or that copy's destructor corrupts the heap
     at exit (measured before: valgrind, one invalid access in finalizePythonInterpreter per

@@ -264,6 +264,31 @@ def test_model_exchange_master_refuses_an_fmi2_file(tmp_path, fmu_dir):
         crankfmu.simulate(path, algorithm="model-exchange")
 
 
+def test_an_fmi3_fmu_with_another_builds_token_is_refused_for_both_interfaces(fmi3_dir, tmp_path):
+    """The instantiationToken is the FMI 3.0 GUID: a modelDescription of another build (here the
+    token replaced, every other byte kept) is refused before anything is unpacked, for
+    Co-Simulation and Model Exchange alike (pythonfmu3's instantiate compares no token: before
+    the FMI 3.0 loader shared the check, the file ran)."""
+    import re
+
+    from crankfmu.fmu.archive import FmuRefused
+    from crankfmu.fmu.instance3 import MODEL_EXCHANGE, open_fmu
+
+    with zipfile.ZipFile(fmi3_dir / "DcServoMotor.fmu") as z:
+        entries = {i.filename: z.read(i) for i in z.infolist()}
+    text = entries["modelDescription.xml"].decode()
+    token = re.search(r'instantiationToken="(\{[^}]+\})"', text)[1]
+    other = "{12345678-1234-5678-1234-567812345678}"
+    entries["modelDescription.xml"] = text.replace(token, other).encode()
+    with zipfile.ZipFile(tmp_path / "DcServoMotor.fmu", "w") as z:
+        for name, data in entries.items():
+            z.writestr(name, data)
+    for interface in ("CoSimulation", MODEL_EXCHANGE):
+        with pytest.raises(FmuRefused, match=re.escape(f"has guid {other}") + ".*" +
+                           re.escape(f"built with guid {token}")):
+            open_fmu("m", tmp_path / "DcServoMotor.fmu", interface=interface)
+
+
 # -- an FMU state across processes ----------------------------------------------------------------
 STATE_SCRIPT = r'''
 import json, sys

@@ -2,7 +2,13 @@
 from __future__ import annotations
 
 import html
+import io
+import os
+import shutil
+import subprocess
+import sys
 import zipfile
+from pathlib import Path
 
 import pytest
 from fmpy import read_model_description
@@ -10,6 +16,7 @@ from fmpy import read_model_description
 from crankfmu.fmu.build import build_fmu, validate
 
 MODELS = ("DcServoMotor", "StephensonPress")
+SERVO_PRESS = Path(__file__).resolve().parents[1] / "scenarios" / "servo_press.toml"
 
 
 def test_every_fmu_passes_fmpy_validate(fmu_dir):
@@ -78,10 +85,131 @@ def test_an_edit_to_one_model_changes_only_its_build_id(tmp_path, monkeypatch):
     shutil.copytree(build.PACKAGE_DIR, copy, ignore=shutil.ignore_patterns("__pycache__"))
     motor = copy / "models" / "dc_motor" / "dc_motor.py"
     motor.write_text(motor.read_text() + "# an edit\n")
-    before = {m: build.sources_digest(build.runtime_files(m))
+    before = {m: build.digest_of(build.catalog_sources(m))
               for m in ("DcServoMotor", "StephensonPress")}
     monkeypatch.setattr(build, "PACKAGE_DIR", copy)
-    after = {m: build.sources_digest(build.runtime_files(m))
+    after = {m: build.digest_of(build.catalog_sources(m))
              for m in ("DcServoMotor", "StephensonPress")}
     assert after["DcServoMotor"] != before["DcServoMotor"]
     assert after["StephensonPress"] == before["StephensonPress"]
+
+
+# -- cached catalog FMUs (issue #27) -------------------------------------------------------------
+def _run_servo_press(fmus: Path, scene: Path = SERVO_PRESS) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "crankfmu", "run", str(scene),
+                           "--stop-time", "0.002", "--no-estimate", "--fmus", str(fmus),
+                           "--out", str(fmus / "run.csv")],
+                          capture_output=True, text=True, timeout=300)
+
+
+def _truncated(data: bytes) -> bytes:
+    return data[:len(data) // 2]
+
+
+def _without_binaries(data: bytes) -> bytes:
+    """What an interrupted build of the old writer could leave: every member but binaries/."""
+    out = io.BytesIO()
+    with zipfile.ZipFile(io.BytesIO(data)) as src, zipfile.ZipFile(out, "w") as dst:
+        for info in src.infolist():
+            if not info.filename.startswith("binaries/"):
+                dst.writestr(info, src.read(info))
+    return out.getvalue()
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+@pytest.mark.parametrize("damage, words", [
+    (_truncated, "damaged: File is not a zip file"),
+    (_without_binaries, "incomplete: no binaries/{platform}/DcServoMotor.so"),
+])
+def test_a_damaged_cached_fmu_is_rebuilt_with_a_notice(fmu_dir, fmi3_dir, tmp_path, damage,
+                                                       words, fmi):
+    """Before: a truncated DcServoMotor.fmu in the FMU folder was rebuilt with the note
+    "sources changed"; one without binaries/ (the build's modelDescription intact) was reused
+    and failed with fmpy's raw "Cannot find shared library" and a traceback. Now both are built
+    again, with one warning line that says why, and the run completes. The same for the FMI
+    3.0 motor in fmus/fmi3/ (a scene with fmi = 3; before the FMI 3.0 build shared the check,
+    the truncated file was rebuilt without a notice, and the one without binaries reused and
+    refused by fmpy)."""
+    for name in ("DcServoMotor", "StephensonPress"):
+        shutil.copy(fmu_dir / f"{name}.fmu", tmp_path / f"{name}.fmu")
+    scene, motor, genuine = SERVO_PRESS, tmp_path / "DcServoMotor.fmu", fmu_dir / "DcServoMotor.fmu"
+    if fmi == 3:
+        scene = tmp_path / "servo_press_fmi3.toml"
+        scene.write_text(SERVO_PRESS.read_text().replace('fmu = "DcServoMotor"',
+                                                         'fmu = "DcServoMotor"\nfmi = 3'))
+        motor, genuine = tmp_path / "fmi3" / "DcServoMotor.fmu", fmi3_dir / "DcServoMotor.fmu"
+        motor.parent.mkdir()
+    motor.write_bytes(damage(genuine.read_bytes()))
+    done = _run_servo_press(tmp_path, scene)
+    assert done.returncode == 0, done.stderr[-3000:]
+    notices = [line for line in done.stderr.splitlines() if "DcServoMotor.fmu" in line]
+    words = words.format(platform={2: "linux64", 3: "x86_64-linux"}[fmi])
+    assert len(notices) == 1 and notices[0].startswith("warning: building") \
+        and words in notices[0] and str(motor) in notices[0], done.stderr
+    assert "StephensonPress" not in done.stderr  # the whole one is used as it is
+    assert motor.read_bytes() == genuine.read_bytes()
+
+
+def test_a_cached_fmu_of_other_sources_is_rebuilt_quietly_and_a_whole_one_used(fmu_dir,
+                                                                               tmp_path):
+    from crankfmu.fmu.build import current_build_id, rebuild_reason
+    whole = fmu_dir / "DcServoMotor.fmu"
+    assert rebuild_reason(whole, "DcServoMotor") is None
+    assert rebuild_reason(tmp_path / "none.fmu", "DcServoMotor").reason == "FMU missing"
+    stale = shutil.copy(fmu_dir / "StephensonPress.fmu", tmp_path / "DcServoMotor.fmu")
+    other = rebuild_reason(Path(stale), "DcServoMotor")  # another model's build id
+    assert (other.reason, other.damaged) == ("sources changed", False)
+    assert current_build_id("DcServoMotor") != current_build_id("StephensonPress")
+
+
+def test_an_interrupted_build_leaves_the_earlier_file_and_no_part(fmu_dir, tmp_path,
+                                                                  monkeypatch):
+    """Before: the build wrote its zip in place, so Ctrl-C (or a crash) during the write left
+    half an FMU under the final name. Now it writes a temporary file beside it and renames."""
+    from crankfmu.fmu import build
+    target = shutil.copy(fmu_dir / "DcServoMotor.fmu", tmp_path / "DcServoMotor.fmu")
+    before = Path(target).read_bytes()
+    written = []
+    original = zipfile.ZipFile.writestr
+
+    def interrupted(self, info, data, *args, **kwargs):
+        written.append(info)
+        if len(written) == 5:
+            raise KeyboardInterrupt
+        return original(self, info, data, *args, **kwargs)
+    monkeypatch.setattr(zipfile.ZipFile, "writestr", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        build.build_fmu("DcServoMotor", tmp_path)
+    assert len(written) == 5  # the write was under way
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["DcServoMotor.fmu"]
+    assert Path(target).read_bytes() == before
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_the_bundled_code_loads_from_its_bytecode_without_compiling(fmu_dir, fmi3_dir, fmi):
+    """Before: every load compiled the FMU's bundled sources (no bytecode in the FMU; a fresh
+    folder per process). Now the FMU carries checked-hash pycs of its package, entry script and
+    pythonfmu (FMI 3.0: pythonfmu3), used even where bytecode is not written
+    (PYTHONDONTWRITEBYTECODE)."""
+    fmu = (fmu_dir if fmi == 2 else fmi3_dir) / "StephensonPress.fmu"
+    script = (
+        "import importlib._bootstrap_external as ext, sys\n"
+        "compiled = []\n"
+        "original = ext.SourceLoader.source_to_code\n"
+        "def recorded(self, data, path, *, _optimize=-1):\n"
+        "    compiled.append(str(path))\n"
+        "    return original(self, data, path, _optimize=_optimize)\n"
+        "ext.SourceLoader.source_to_code = recorded\n"
+        "from crankfmu.fmu.instance3 import open_fmu\n"
+        f"fmu = open_fmu('m', {str(fmu)!r})\n"
+        "fmu.instantiate()\n"
+        "fmu.terminate()\n"
+        "bundled = [p for p in compiled if fmu.unzip_dir in p]\n"
+        "loaded = [m for m in sys.modules if m.startswith(('crankfmu_rt_', 'crankfmu_'))\n"
+        "          and getattr(sys.modules[m], '__file__', '').startswith(fmu.unzip_dir)]\n"
+        "print(len(loaded), bundled)\n")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=120, env={**os.environ, "PYTHONDONTWRITEBYTECODE": "1"})
+    assert done.returncode == 0, done.stderr[-2000:]
+    count, bundled = done.stdout.split(maxsplit=1)
+    assert int(count) >= 8 and bundled.strip() == "[]", done.stdout

@@ -453,6 +453,57 @@ def test_an_fmu_file_that_is_not_a_zip(tmp_path):
         run_scene(scene, RunOptions(out=tmp_path / "x.csv", progress=False))
 
 
+def _motor_copy(fmu_dir, tmp_path, change) -> Path:
+    """The scene's motor as a copy of the catalog FMU with `change(entries)` applied to its zip
+    members (name -> bytes), beside a servo press scene that uses it."""
+    with zipfile.ZipFile(fmu_dir / "DcServoMotor.fmu") as z:
+        entries = {i.filename: z.read(i) for i in z.infolist()}
+    change(entries)
+    with zipfile.ZipFile(tmp_path / "motor.fmu", "w", zipfile.ZIP_DEFLATED) as z:
+        for name, data in entries.items():
+            z.writestr(name, data)
+    return write(tmp_path, SERVO.replace('fmu = "DcServoMotor"', 'fmu = "motor.fmu"'))
+
+
+def _other_guid(entries) -> None:
+    md = entries["modelDescription.xml"].decode()
+    guid = re.search(r'guid="(\{[^}]+\})"', md)[1]
+    entries["modelDescription.xml"] = md.replace(guid, "{12345678-1234-5678-1234-567812345678}"
+                                                 ).encode()
+
+
+def _absolute_member(entries) -> None:
+    entries["/tmp/crankfmu-absolute-member.txt"] = b"unpacked outside the FMU's folder"
+
+
+@pytest.mark.parametrize("change, words", [
+    (_other_guid, "modelDescription.xml has guid {12345678-1234-5678-1234-567812345678}"),
+    (_absolute_member, "zip member '/tmp/crankfmu-absolute-member.txt' has an absolute name"),
+])
+def test_an_fmu_with_a_foreign_guid_or_an_absolute_member_is_refused(fmu_dir, tmp_path, change,
+                                                                      words):
+    """Issue #27. Before: an FMU whose modelDescription carries another GUID than its build's
+    ran normally (pythonfmu's fmi2Instantiate compares no GUID); a member with an absolute name
+    stopped the run in fmpy's extract with a bare Exception and a traceback. Now both are
+    refused before anything is unpacked: exit 2, the file, the key, what is wrong."""
+    scene = _motor_copy(fmu_dir, tmp_path, change)
+    done = run_cli("run", scene, "--fmus", fmu_dir, "--out", tmp_path / "x.csv", "--no-estimate")
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+    assert "[components.motor].fmu: cannot load" in done.stderr and \
+        str(tmp_path / "motor.fmu") in done.stderr and words in done.stderr, done.stderr
+    assert not Path("/tmp/crankfmu-absolute-member.txt").exists()
+
+
+def test_an_fmu_file_name_too_long_for_the_file_system(tmp_path):
+    """Issue #27. Before: `OSError: [Errno 36] File name too long` with a traceback."""
+    scene = write(tmp_path, SERVO.replace('fmu = "DcServoMotor"', f'fmu = "{"a" * 5000}.fmu"'))
+    done = run_cli("run", scene, "--out", tmp_path / "x.csv", "--no-estimate")
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+    assert "[components.motor].fmu: the FMU file name" in done.stderr and \
+        "is too long for the file system: a file or folder name may have at most 255 bytes" \
+        in done.stderr and len(done.stderr) < 1000, done.stderr
+
+
 @pytest.mark.parametrize("old, new, key, words", [
     ("start_time = 0.0", "start_time = -1e308", "[scene].start_time", "must be >= -1e+12"),
     ("step = 1e-3 ", "step = 5e-324 ", "[master].step", "below the time's resolution"),

@@ -14,6 +14,7 @@ import json
 import shutil
 import subprocess
 import sys
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -52,22 +53,30 @@ def build_from_copy(tmp: Path, dest: Path, build_id: str | None = None) -> Path:
         f.write(MARKER)
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(build, "PACKAGE_DIR", package)
-        digest = build_id or build.sources_digest(build.runtime_files("DcServoMotor"))  # the copy's own id
+        digest = build_id or build.digest_of(build.catalog_sources("DcServoMotor"))  # its own
         mp.setattr(build, "current_build_id", lambda model: digest)  # the cached real id stays intact
         return build.build_fmu("DcServoMotor", dest)
 
 
 def run_in_fresh_process(fmus: list[tuple[str, Path]]) -> dict:
-    """Load and step the FMUs in this order in a new interpreter; last outputs and the runtime
-    packages it imported."""
+    """Load the FMUs in this order in a new interpreter, then step those that loaded; last
+    outputs, the runtime packages it imported, and the refusals (name -> message)."""
     script = (
         "import json, sys\n"
+        "from crankfmu.fmu.archive import FmuRefused\n"
+        "from crankfmu.fmu.instance3 import open_fmu\n"
         "from tests.support.importer_support import step_together\n"
-        "specs = [(n, p, None) for n, p in json.loads(sys.argv[1])]\n"
+        "specs, refused = [], {}\n"
+        "for n, p in json.loads(sys.argv[1]):\n"
+        "    try:\n"
+        "        open_fmu(n, p)\n"
+        "        specs.append((n, p, None))\n"
+        "    except FmuRefused as err:\n"
+        "        refused[n] = str(err)\n"
         f"res = step_together(specs, {H!r}, {N_STEPS}, {RTOL!r})\n"
         "out = {n: dict(zip(names, rows[-1, 1:].tolist())) for n, (names, rows) in res.items()}\n"
         "rt = sorted(m for m in sys.modules if m.startswith('crankfmu_rt_') and '.' not in m)\n"
-        "print(json.dumps({'outputs': out, 'runtimes': rt}))\n")
+        "print(json.dumps({'outputs': out, 'runtimes': rt, 'refused': refused}))\n")
     done = subprocess.run([sys.executable, "-c", script,
                            json.dumps([(n, str(p)) for n, p in fmus])],
                           capture_output=True, text=True, timeout=120,
@@ -130,12 +139,46 @@ def test_fmus_of_two_builds_in_one_process_each_run_their_own_code(two_builds, o
            {k: v for k, v in out["B"].items() if k != "flange_J"}
 
 
-def test_control_same_build_id_with_other_code_would_silently_collide(two_builds,
-                                                                      tmp_path):
-    """Why the digest matters (and proof the test above can fail): build B's code stamped with
-    A's build id gets A's module names; in one process whichever loads first wins, silently."""
+def patched_copy(fmu: Path, dest: Path) -> Path:
+    """The FMU with MARKER appended to its bundled dc_motor.py, every other byte and name kept
+    (a hand patch: unzip, edit, zip). Its bytecode is left as built: Python finds the source
+    changed (checked-hash pycs) and compiles the patched source."""
+    with zipfile.ZipFile(fmu) as z:
+        entries = {i.filename: z.read(i) for i in z.infolist()}
+    source = next(n for n in entries if n.endswith("/models/dc_motor/dc_motor.py"))
+    entries[source] += MARKER.encode()
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    with zipfile.ZipFile(dest, "w", zipfile.ZIP_DEFLATED) as z:
+        for name, data in entries.items():
+            z.writestr(name, data)
+    return dest
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+@pytest.mark.parametrize("order", ["patched first", "genuine first"])
+def test_a_patched_fmu_is_refused_and_never_lends_its_code(catalog, fmi3_dir, tmp_path, order,
+                                                           fmi):
+    """Issue #27: a DcServoMotor patched by hand keeps its names (model, build id, package), so
+    in one process whichever loaded first decided the code of both: before, loaded first it
+    gave the genuine FMU its flange_J + 1 kg.m2 (and in the servo press, press.phi 9.682
+    instead of 4.839 rad at 0.3 s). Now the patched file is refused, naming what is wrong, and
+    the genuine one runs its own code. The same for the FMI 3.0 FMU (before its loader shared
+    the check: loaded, and the code of whichever was instantiated first ran in both)."""
+    genuine = catalog["DcServoMotor"] if fmi == 2 else fmi3_dir / "DcServoMotor.fmu"
+    patched = patched_copy(genuine, tmp_path / "patched" / "DcServoMotor.fmu")
+    fmus = [("B", patched), ("A", genuine)]
+    result = run_in_fresh_process(fmus if order == "patched first" else fmus[::-1])
+    assert "is not the code its digest" in result["refused"].get("B", ""), result
+    assert result["outputs"]["A"]["flange_J"] == 0.05  # J_rotor's start value, exactly
+
+
+def test_the_same_build_id_with_other_code_is_refused(two_builds, tmp_path):
+    """Build B's code stamped with A's build id gets A's module names: before, in one process
+    whichever loaded first won, silently (B ran A's code). Now the forged FMU is refused: its
+    code is not what the digest in its names stands for."""
     a = two_builds[0]
     forged = build_from_copy(tmp_path, tmp_path / "fmus",
                              build_id=read_model_description(str(a)).version)
-    out = run_in_fresh_process([("A", a), ("B", forged)])["outputs"]
-    assert out["B"]["flange_J"] == out["A"]["flange_J"] == 0.05  # B ran A's code
+    result = run_in_fresh_process([("A", a), ("B", forged)])
+    assert "is not the code its digest" in result["refused"].get("B", ""), result
+    assert result["outputs"]["A"]["flange_J"] == 0.05

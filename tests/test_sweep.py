@@ -207,6 +207,64 @@ def test_killed_local_worker_loses_nothing(tmp_path, rotor_fmu_dir, serial_run):
     same_table(serial, table)
 
 
+def _session_processes(sid: int) -> list[tuple[int, str]]:
+    """(pid, command line) of every process of the session `sid` (Linux /proc)."""
+    found = []
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            stat = Path(f"/proc/{pid}/stat").read_text()
+            command = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+        except OSError:  # ended meanwhile
+            continue
+        if int(stat[stat.rindex(")") + 2:].split()[3]) == sid:
+            found.append((int(pid), command[:120]))
+    return found
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").is_file(), reason="reads /proc (Linux)")
+def test_kill_9_of_a_sweep_leaves_no_process_and_no_temporary_folder(tmp_path, rotor_fmu_dir):
+    """Issue #27. Before: after `kill -9` of `crankfmu sweep --jobs 2`, its 2 workers waited on
+    their task queue for good, and with them multiprocessing's resource tracker (one set was
+    still alive after 14 minutes). Now each worker ends when the pipe only its parent writes to
+    closes, removing its temporary folders, and the tracker ends after them. The sweep runs in
+    its own session; every process of that session must be gone within 30 s of the kill (the
+    workers see the pipe close at once; the bound is for a loaded machine)."""
+    import subprocess
+    import sys
+    scene = spinner(tmp_path, stop=200.0)  # runs of seconds: the sweep is killed mid-run
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    sweep_process = subprocess.Popen(
+        [sys.executable, "-m", "crankfmu", "sweep", str(scene), *(f"--vary={v}" for v in VARY),
+         "--jobs", "2", "--fmus", str(rotor_fmu_dir), "--out", str(tmp_path / "out"),
+         "--no-progress"], start_new_session=True, env={**os.environ, "TMPDIR": str(tmp)},
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    sid = sweep_process.pid
+    try:
+        end = time.time() + 120
+        while len([c for _, c in _session_processes(sid) if "spawn_main" in c]) < 2:
+            assert time.time() < end and sweep_process.poll() is None, \
+                sweep_process.stderr.read().decode()[-2000:]
+            time.sleep(0.1)
+        time.sleep(1.0)  # the workers load their FMUs and run
+        before = _session_processes(sid)
+        os.kill(sweep_process.pid, signal.SIGKILL)
+        sweep_process.wait()
+        end = time.time() + 30
+        while _session_processes(sid) and time.time() < end:
+            time.sleep(0.1)
+        left = _session_processes(sid)
+    finally:
+        for pid, _ in _session_processes(sid):  # what the test started, by its id
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:  # ended meanwhile
+                pass
+    print(f"\nkilled the sweep; its session held {len(before)} processes: {before}")
+    assert left == [], left
+    assert not [p.name for p in tmp.iterdir() if p.name.startswith("crankfmu-")]
+
+
 @pytest.fixture(scope="module")
 def hybrid_fmus(fmu_dir):
     return fmu_dir  # the session's catalog (tests/conftest.py)

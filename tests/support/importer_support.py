@@ -49,18 +49,21 @@ def relative_deviation(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def real_outputs(model_description) -> list:
+    """The Real outputs (FMI 3.0: Float64)."""
+    from crankfmu.fmu.instance3 import value_type
     return [v for v in model_description.modelVariables
-            if v.causality == "output" and v.type == "Real"]
+            if v.causality == "output" and value_type(v) == "Real"]
 
 
 def step_together(specs, h: float, n_steps: int, rtol: float) -> dict[str, tuple[list, np.ndarray]]:
     """Instantiate every FMU of `specs` [(instance name, FMU path, start values)] in this process
-    with fmpy (through crankfmu's FmuInstance), initialize them, then step them interleaved:
-    doStep(n h, h) for each in turn, n = 0 .. n_steps - 1. All Real outputs are sampled after
-    initialization and after every step. Returns {name: (output names, rows of [t, outputs])}."""
-    from crankfmu.fmu.instance import FmuInstance
+    with fmpy (through crankfmu's FmuInstance; an FMI 3.0 file as Co-Simulation), initialize
+    them, then step them interleaved: doStep(n h, h) for each in turn, n = 0 .. n_steps - 1.
+    All Real outputs are sampled after initialization and after every step. Returns
+    {name: (output names, rows of [t, outputs])}."""
+    from crankfmu.fmu.instance3 import open_fmu
 
-    fmus = {name: FmuInstance(name, path) for name, path, _ in specs}
+    fmus = {name: open_fmu(name, path) for name, path, _ in specs}
     names = {n: [v.name for v in real_outputs(f.model_description)] for n, f in fmus.items()}
     rows = {n: np.empty((n_steps + 1, len(names[n]) + 1)) for n in fmus}
     try:

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 import signal
+import sys
 import threading
 import time
 import zipfile
@@ -486,13 +487,48 @@ def _fmi_failure(err, fmus, log: LogCollector, t: float) -> str:
         (f"; the FMU said: {' | '.join(reasons)}" if reasons else "")
 
 
+def _on_terminal() -> bool:
+    try:
+        return sys.stderr.isatty()
+    except (AttributeError, ValueError):  # replaced or closed: as tqdm takes it, no terminal
+        return False
+
+
 def _progress(steps, enabled, label, total=None):
-    """A tqdm bar over `steps`, or (steps None) a bar over `total` seconds of simulated time."""
-    if enabled is False:
-        return steps
-    from tqdm import tqdm
+    """A tqdm bar over `steps`, or (steps None) a bar over `total` seconds of simulated time;
+    on a terminal (or `enabled` True) only, and from half a second into the run on (tqdm's
+    refresh interval): a shorter run neither draws a bar nor imports tqdm."""
+    if enabled is False or (enabled is None and not _on_terminal()):
+        return steps  # tqdm draws nothing there (disable=None): not even imported
     if steps is None:
-        return tqdm(total=total, desc=label, unit="s", disable=None if enabled is None else False,
-                    mininterval=0.5, leave=False, bar_format="{l_bar}{bar}| {n:.3g}/{total:.3g} s")
-    return tqdm(steps, desc=label, unit="step", disable=None if enabled is None else False,
-                mininterval=0.5, leave=False)
+        return _LateBar(dict(total=total, desc=label, unit="s",
+                             bar_format="{l_bar}{bar}| {n:.3g}/{total:.3g} s"))
+    return _LateBar(dict(total=len(steps), desc=label, unit="step")).over(steps)
+
+
+class _LateBar:
+    """A tqdm bar made at the first update half a second after this object: update(n), close()."""
+
+    def __init__(self, options: dict):
+        self._options, self._start, self._done, self._bar = options, time.perf_counter(), 0, None
+
+    def update(self, n) -> None:
+        self._done += n
+        if self._bar is not None:
+            self._bar.update(n)
+        elif time.perf_counter() - self._start >= 0.5:
+            from tqdm import tqdm
+            self._bar = tqdm(initial=self._done, disable=False, mininterval=0.5, leave=False,
+                             **self._options)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
+
+    def over(self, steps):
+        try:
+            for step in steps:
+                yield step
+                self.update(1)
+        finally:
+            self.close()

@@ -1,34 +1,49 @@
-"""Build every FMU into fmus/ with pythonfmu and check each with fmpy validate.
+"""Build every FMU into fmus/ with pythonfmu and check each with fmpy validate; the bundle, its
+digest, bytecode and atomic write that the FMI 3.0 build (fmu/build_fmi3.py) shares.
 
 An FMU bundles what it runs and nothing else: the runtime (crankfmu/runtime: the model contract,
-the integrator, the pythonfmu adapter) and its model's folder (crankfmu/models/<folder>), as a
-package named `crankfmu_rt_<digest>`, where the digest hashes exactly those sources. All Python
-FMUs in one process share one interpreter and one sys.modules: FMUs of the same model and build
-share the package (same code); FMUs of other models or builds load other packages, so no FMU
-ever runs code it was not built with, and an edit to one model rebuilds only that model's FMU.
+the integrator, the FMI adapter of its version) and its model's folder (crankfmu/models/<folder>),
+as a package named `crankfmu_rt_<digest>`, with an entry script `crankfmu_<digest>_<Model>.py`; the
+digest hashes exactly those files (fmu/bundle.py), and the loader checks it. All Python FMUs in
+one process share one interpreter and one sys.modules: FMUs of the same model and build share the
+package (same code); FMUs of other models or builds load other packages, so no FMU ever runs
+code it was not built with, and an edit to one model rebuilds only that model's FMU. The
+modules' bytecode is in the FMU, so loading it compiles nothing.
+
+A build is written to a temporary file beside its target and renamed over it: an interrupted
+build leaves the earlier file or none, never half an FMU, and a process reading the FMU while
+another builds it reads one whole file.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import functools
-import html
-import shutil
+import hashlib
+import io
+import os
 import sys
 import tempfile
 import zipfile
+from dataclasses import dataclass
 from pathlib import Path
 
-from ..models.catalog import FMU_MODELS, model_folder, physics_class
-from ..runtime.slave import ModelSlave, variable_table
+from ..models.catalog import FMU_MODELS, model_folder
 from . import launcher
-from .launcher import compile_launcher, hosting_html, package_binary
-from .model_description import model_description, sources_digest
+from .bundle import (LIBRARIES, LIBRARY_FOLDERS, MARK, SLAVE_MODULE, check_description,
+                     digest_of, entry_module, find_bundle, package_name, render)
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
 RUNTIME_DIR = "runtime"  # bundled whole in every FMU, with the model's folder
 # The runtime imports all its modules at once: a later FMU of the same build finds them in
 # sys.modules even after the FMU that first loaded the package was freed and its files deleted.
-RUNTIME_INIT = '''"""crankfmu runtime bundled in FMUs (build {digest})."""
+# The launcher's sources and the modelDescription writer are named here so that a new launcher
+# or writer is a new build.
+RUNTIME_INIT = '''"""crankfmu runtime bundled in FMUs (build {digest}).
+
+Built with the FMU launcher whose sources have SHA-256 {launcher} and the modelDescription
+writer whose model_description.py has SHA-256 {writer}.
+"""
 import importlib
 import pkgutil
 
@@ -82,31 +97,83 @@ def runtime_files(model_name: str | None, fmi_version: int = 2) -> list[tuple[st
     return [(name, (PACKAGE_DIR / name).read_bytes()) for name in names]
 
 
-@functools.lru_cache(maxsize=None)
-def current_build_id(model_name: str | None) -> str:
-    """Hash of the model's bundled sources: the FMU's version and GUID seed (computed once)."""
-    templates = [("<entry script>", ENTRY_SCRIPT.encode()),
-                 ("<runtime init>", RUNTIME_INIT.encode()),
-                 ("<launcher>", launcher.source_bytes(2))]  # changed: a new build
-    return sources_digest(runtime_files(model_name) + templates)
+def bundle_sources(model_name: str | None, class_name: str, entry_script: str,
+                   fmi_version: int = 2) -> dict[str, bytes]:
+    """An FMU's Python, names relative to resources/, with bundle.MARK for its digest: the
+    package (runtime_files(model_name, fmi_version) and its __init__), the entry script
+    `entry_script` (written with MARK for the digest) defining the slave class `class_name`,
+    slavemodule.txt naming it, and the FMI library's package (pythonfmu, pythonfmu3) as its
+    builder copies it."""
+    package = package_name(MARK)
+    files = {f"{package}/{name}": data for name, data in runtime_files(model_name, fmi_version)}
+    files[f"{package}/__init__.py"] = RUNTIME_INIT.format(
+        digest=MARK, launcher=hashlib.sha256(launcher.source_bytes(fmi_version)).hexdigest(),
+        writer=hashlib.sha256((PACKAGE_DIR / "fmu" / "model_description.py").read_bytes()
+                              ).hexdigest()).encode()
+    files[f"{entry_module(MARK, class_name)}.py"] = entry_script.encode()
+    files[SLAVE_MODULE] = entry_module(MARK, class_name).encode()
+    library = library_folder(fmi_version)
+    files.update({f"{LIBRARIES[fmi_version]}/{name}": (library / name).read_bytes()
+                  for name in sorted(os.listdir(library))
+                  if name.endswith(".py") and not name.startswith(".")})  # as its glob
+    return files
 
 
-def _write_runtime(dest: Path, model_name: str | None, digest: str) -> Path:
-    package = dest / f"crankfmu_rt_{digest}"
-    for name, data in runtime_files(model_name):
-        target = package / name
-        target.parent.mkdir(parents=True, exist_ok=True)
-        target.write_bytes(data)
-    (package / "__init__.py").write_text(RUNTIME_INIT.format(digest=digest))
-    return package
+def library_folder(fmi_version: int) -> Path:
+    """The installed package of the FMI library (pythonfmu for FMI 2.0, pythonfmu3 for 3.0): the
+    first on sys.path that carries its binaries (resources/binaries/). Not what `import` finds:
+    in a process that has loaded an FMU of that version, the FMU's copy of the package (its
+    Python files only) is first on sys.path and in sys.modules. Looked up, not imported."""
+    name = LIBRARIES[fmi_version]
+    for entry in sys.path:
+        folder = Path(entry or ".") / name
+        if (folder / "__init__.py").is_file() and (folder / "resources" / "binaries").is_dir():
+            return folder
+    raise SystemExit(f"building FMI {fmi_version}.0 FMUs needs {name} (pip install {name}; "
+                     "pyproject.toml gives the version)")
 
 
-def _write_script(dest: Path, model_name: str, digest: str) -> Path:
+def catalog_sources(model_name: str) -> dict[str, bytes]:
+    """bundle_sources of a catalog model, with the generated entry script."""
     module, cls = FMU_MODELS[model_name].split(":")
-    script = dest / f"crankfmu_{digest}_{model_name}.py"
-    script.write_text(ENTRY_SCRIPT.format(digest=digest, module=module, cls=cls,
-                                          model_name=model_name))
-    return script
+    script = ENTRY_SCRIPT.format(digest=MARK, module=module, cls=cls, model_name=model_name)
+    return bundle_sources(model_name, model_name, script)
+
+
+@functools.lru_cache(maxsize=None)
+def current_build_id(model_name: str) -> str:
+    """The digest of the model's bundle (fmu/bundle.py): the FMU's version and GUID seed,
+    computed once per process."""
+    return digest_of(catalog_sources(model_name))
+
+
+def write_bundle(dest: Path, marked: dict[str, bytes], digest: str) -> tuple[Path, Path]:
+    """The bundle rendered with `digest` into `dest` (but what pythonfmu's builder writes:
+    slavemodule.txt and the library's package); returns (package folder, entry script)."""
+    rendered = render(marked, digest)
+    for name, data in rendered.items():
+        if name != SLAVE_MODULE and not name.startswith(LIBRARY_FOLDERS):
+            (dest / name).parent.mkdir(parents=True, exist_ok=True)
+            (dest / name).write_bytes(data)
+    return dest / package_name(digest), dest / f"{rendered[SLAVE_MODULE].decode()}.py"
+
+
+@contextlib.contextmanager
+def bundle_on_path(marked: dict[str, bytes], digest: str):
+    """The bundle written into a temporary folder first on sys.path (write_bundle): yields
+    (folder, package folder, entry script); afterwards the folder is off sys.path and gone, and
+    what was imported from it is out of sys.modules (the runtime of FMUs of this build already
+    running stays)."""
+    with tempfile.TemporaryDirectory(prefix="crankfmu_build_") as tmp:
+        package, script = write_bundle(Path(tmp), marked, digest)
+        sys.path.insert(0, tmp)
+        loaded_before = set(sys.modules)
+        try:
+            yield Path(tmp), package, script
+        finally:
+            sys.path.remove(tmp)
+            for name in [m for m in sys.modules if digest in m and m not in loaded_before]:
+                del sys.modules[name]
 
 
 def model_card_files(model_name: str) -> list[Path]:
@@ -120,6 +187,10 @@ def model_card_files(model_name: str) -> list[Path]:
 def model_card_html(model_name: str) -> str:
     """documentation/index.html: the model card (models/<folder>/README.md) and a table of
     parameters, effects, inputs and outputs with units."""
+    import html
+
+    from ..models.catalog import physics_class
+    from ..runtime.slave_core import variable_table
     cls = physics_class(model_name)
     rows = []
     for v in variable_table(cls):
@@ -136,57 +207,132 @@ def model_card_html(model_name: str) -> str:
             f"<th>range</th><th>description</th></tr>{''.join(rows)}</table></body></html>")
 
 
-def _repack(built: Path, target: Path, model_name: str, slave_class, digest: str) -> None:
-    """Rewrite pythonfmu's zip: our modelDescription, the model card, fixed timestamps."""
+def _repack(built: Path, target: Path, slave_class, digest: str, rendered: dict[str, bytes],
+           card: str | None = None) -> None:
+    """Rewrite pythonfmu's zip into `target`: our modelDescription, then as `pack`."""
+    from .model_description import model_description
+
     entries = {}
     with zipfile.ZipFile(built) as z:
         for info in z.infolist():
             if info.filename != "modelDescription.xml" and not info.is_dir():
                 entries[info.filename] = z.read(info)
-    entries["modelDescription.xml"] = model_description(
-        slave_class, digest, (launcher.host_requirements(), launcher.SEARCH_TEXT))
-    entries["documentation/index.html"] = model_card_html(model_name).encode()
-    _package_launcher(entries, slave_class.physics_class.model_name)
-    with zipfile.ZipFile(target, "w", zipfile.ZIP_DEFLATED) as z:
-        for name in sorted(entries):
-            info = zipfile.ZipInfo(name, ZIP_DATE)
-            info.compress_type = zipfile.ZIP_DEFLATED
-            info.external_attr = 0o644 << 16
-            z.writestr(info, entries[name])
+    entries["modelDescription.xml"] = model_description(slave_class, digest, host())
+    pack(target, entries, rendered, slave_class.physics_class.model_name, 2, card)
 
 
-def _package_launcher(entries: dict[str, bytes], model_identifier: str) -> None:
-    """The native launcher in front of pythonfmu's binary (fmu/launcher), and the model card's
-    section on hosting the FMU; without a C compiler the binary stays (the card says so)."""
-    launcher = compile_launcher()
-    package_binary(entries, model_identifier, launcher)
-    card = entries["documentation/index.html"].decode()
-    entries["documentation/index.html"] = card.replace(
-        "</body>", hosting_html(launcher is not None) + "</body>").encode()
+def host() -> tuple[str, str]:
+    """(requirements, search) of the modelDescription's host annotation."""
+    return launcher.host_requirements(), launcher.SEARCH_TEXT
+
+
+def pack(target: Path, entries: dict[str, bytes], rendered: dict[str, bytes],
+         model_identifier: str, fmi_version: int, card: str | None) -> None:
+    """Write an FMU of `fmi_version` from its `entries` (zip name -> bytes) to `target`, with
+    the checked-hash bytecode of its `rendered` bundle, the native launcher in front of the
+    library's binary, and the model card `card` (if any) with the section on hosting it
+    (without a launcher: what that means). Written atomically."""
+    from .bundle import bytecode
+
+    entries.update({f"resources/{name}": pyc for name, pyc in bytecode(rendered).items()})
+    compiled = launcher.compile_launcher(fmi_version)
+    launcher.package_binary(entries, model_identifier, compiled, fmi_version)
+    if card is not None:
+        entries["documentation/index.html"] = card.replace(
+            "</body>", launcher.hosting_html(compiled is not None, fmi_version) + "</body>"
+        ).encode()
+    write_atomically(target, entries)
+
+
+def write_atomically(target: Path, entries: dict[str, bytes]) -> None:
+    """A zip of `entries` (sorted, fixed timestamps) at `target`, through a temporary file in
+    the same folder renamed over it (a reader sees the old file or the new one, whole)."""
+    fd, part = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent)
+    try:
+        with os.fdopen(fd, "wb") as f, zipfile.ZipFile(f, "w", zipfile.ZIP_DEFLATED) as z:
+            for name in sorted(entries):
+                info = zipfile.ZipInfo(name, ZIP_DATE)
+                info.compress_type = zipfile.ZIP_DEFLATED
+                info.external_attr = 0o644 << 16
+                z.writestr(info, entries[name])
+        os.chmod(part, 0o644)  # mkstemp's 0600: the FMU is read like any built file
+        os.replace(part, target)
+    except BaseException:
+        Path(part).unlink(missing_ok=True)
+        raise
+
+
+def build_bundle_fmu(dest: Path, marked: dict[str, bytes], class_name: str,
+                     card: str | None = None) -> Path:
+    """Build `marked` (bundle_sources) into dest/<class_name>.fmu with pythonfmu; the digest is
+    the bundle's (current_build_id for a catalog model)."""
+    return _build(dest, marked, class_name, digest_of(marked), card)
+
+
+def _build(dest: Path, marked: dict[str, bytes], class_name: str, digest: str,
+           card: str | None) -> Path:
+    from pythonfmu.builder import FmuBuilder
+
+    dest.mkdir(parents=True, exist_ok=True)
+    target = dest / f"{class_name}.fmu"
+    with bundle_on_path(marked, digest) as (tmp, package, script):
+        built = FmuBuilder.build_FMU(script, dest=tmp / "out", project_files=[package])
+        slave_class = getattr(sys.modules[script.stem], class_name)
+        _repack(built, target, slave_class, digest, render(marked, digest), card)
+    return target
 
 
 def build_fmu(model_name: str, dest: Path) -> Path:
-    from pythonfmu.builder import FmuBuilder
+    """The catalog model's FMU, built into dest/<model_name>.fmu."""
+    return _build(dest, catalog_sources(model_name), model_name,
+                  current_build_id(model_name), model_card_html(model_name))
 
-    digest = current_build_id(model_name)
-    dest.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(prefix="crankfmu_build_") as tmp:
-        tmp = Path(tmp)
-        runtime = _write_runtime(tmp, model_name, digest)
-        script = _write_script(tmp, model_name, digest)
-        sys.path.insert(0, str(tmp))
-        loaded_before = set(sys.modules)  # e.g. the runtime of FMUs of this build already running
-        try:
-            built = FmuBuilder.build_FMU(script, dest=tmp / "out", project_files=[runtime])
-            module = sys.modules[script.stem]
-            slave_class = getattr(module, model_name)
-            target = dest / f"{model_name}.fmu"
-            _repack(built, target, model_name, slave_class, digest)
-        finally:
-            sys.path.remove(str(tmp))
-            for name in [m for m in sys.modules if digest in m and m not in loaded_before]:
-                del sys.modules[name]  # what the build imported from the temporary folder
-    return target
+
+@dataclass(frozen=True)
+class Rebuild:
+    """Why a catalog FMU in the FMU folder is built (again)."""
+
+    reason: str
+    damaged: bool  # the file there is not a whole build: a notice, not a routine rebuild
+
+
+def rebuild_reason(path: Path, model_name: str, fmi_version: int = 2,
+                   build_id: str | None = None) -> Rebuild | None:
+    """None when `path` is a whole build of the model's current sources for `fmi_version`: a
+    zip whose bundle matches its digest (fmu/bundle.py), which is the current build id
+    (`build_id`; default: the FMI 2.0 one, current_build_id), with the GUID (FMI 3.0: the
+    instantiationToken) of that build and this platform's binaries. Otherwise why it must be
+    built."""
+    from fmpy import platform, platform_tuple, sharedLibraryExtension
+
+    from .archive import inspect_fmu, parse_safe_xml, read_fmu
+    if not path.is_file():
+        return Rebuild("FMU missing", False)
+    folder = platform if fmi_version == 2 else platform_tuple
+    binary = f"binaries/{folder}/{model_name}{sharedLibraryExtension}"
+    library_binary = binary.replace(model_name, f"{model_name}_{launcher.REAL_SUFFIX[fmi_version]}",
+                                    1)
+    try:
+        data, key = read_fmu(path)
+        with zipfile.ZipFile(io.BytesIO(data)) as zf:
+            bundle = find_bundle(zf)
+            if bundle is None:
+                return Rebuild("not a crankfmu build: no bundled crankfmu package", True)
+            if bundle.digest != (build_id or current_build_id(model_name)):
+                return Rebuild("sources changed", False)
+            inspect_fmu(zf, key)  # names, description, and files those of its digest
+            root = parse_safe_xml(zf.read("modelDescription.xml"), "modelDescription.xml")
+            token = root.get("guid" if fmi_version == 2 else "instantiationToken")
+            check_description(bundle, model_name, root.get("version"), token)
+            names = set(zf.namelist())
+            wanted = [binary] + [library_binary] * (
+                f"resources/{launcher.CONFIG_NAME}" in names)  # behind the launcher
+            missing = [n for n in wanted if n not in names]
+            if missing:
+                return Rebuild(f"incomplete: no {', '.join(missing)}", True)
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile) as err:  # ValueError: refusals
+        return Rebuild(f"damaged: {err}", True)
+    return None
 
 
 def validate(fmu: Path) -> list[str]:

@@ -1,35 +1,34 @@
 """Build the FMI 3.0 FMUs (Co-Simulation and Model Exchange in one file) into fmus/fmi3/ and
 check each with fmpy validate.
 
-The same model code as the FMI 2.0 FMUs (fmu/build.py): an FMU bundles the runtime with its FMI
-3.0 adapter (runtime/slave3.py) and its model's folder as a package `crankfmu_rt_<digest>`, the
-entry script names the model class, pythonfmu3's Python package and binary come from the
-installed pythonfmu3, and crankfmu's FMI 3.0 launcher (fmu/launcher/launcher3.c) stands in front
-of that binary. The modelDescription is crankfmu's (model_description.model_description_fmi3).
+The same model code as the FMI 2.0 FMUs and the same bundle (fmu/build.py, fmu/bundle.py): an
+FMU bundles the runtime with its FMI 3.0 adapter (runtime/slave3.py) and its model's folder as a
+package `crankfmu_rt_<digest>` and an entry script `crankfmu_<digest>_<Model>.py` naming the
+model class, with pythonfmu3's Python package; the digest hashes all of it, the loader checks it
+(a patched FMU is refused), the instantiationToken is the build's, the modules' checked-hash
+bytecode is in the FMU, and the file is written atomically, as for FMI 2.0. pythonfmu3's binary
+comes from the installed pythonfmu3, with crankfmu's FMI 3.0 launcher (fmu/launcher/launcher3.c)
+in front of it. The modelDescription is crankfmu's (model_description.model_description_fmi3).
 
 Model Exchange exposes the model's continuous states, and those depend on the effects (an effect
 that is off adds no state), while a modelDescription fixes them. So an FMU is built for an
 effect set: `fmus/fmi3/<Model>.fmu` for the model's default effects, and, for an effect set
 whose states differ, `fmus/fmi3/<Model>__<effect>__<effect>.fmu` (`__no_effects` for none),
-built when a scene needs it (`fmu_for`) or with `crankfmu build --fmi 3 --effects a,b Model`.
+built when a scene needs it (system/wiring.py resolve_fmu) or with
+`crankfmu build --fmi 3 --effects a,b Model`.
 Co-Simulation takes any effects in any of them.
 """
 from __future__ import annotations
 
 import functools
 import importlib
-import os
-import shutil
-import sys
-import tempfile
-import zipfile
 from pathlib import Path
 
 from ..models.catalog import FMU_MODELS, physics_class
 from . import launcher
-from .build import (PACKAGE_DIR, RUNTIME_INIT, ZIP_DATE, model_card_html, report, runtime_files,
-                    validate)
-from .model_description import model_description_fmi3, sources_digest
+from .build import (bundle_on_path, bundle_sources, host, library_folder, model_card_html, pack,
+                    report, validate)
+from .bundle import MARK, digest_of, render
 
 FMI3_DIR = "fmi3"  # under the FMU folder: fmus/fmi3/
 ENTRY_SCRIPT = '''"""FMU entry point written by crankfmu build (FMI 3.0) {digest}."""
@@ -73,63 +72,21 @@ def fmu_name(model_name: str, effects=None) -> str:
     return f"{model_name}__{'__'.join(chosen) or 'no_effects'}.fmu"
 
 
+def catalog_sources3(model_name: str, effects: tuple[str, ...]) -> dict[str, bytes]:
+    """build.bundle_sources of the model's FMI 3.0 FMU for `effects`: the entry script names
+    them and their states, so each effect set is its own build."""
+    module, cls = FMU_MODELS[model_name].split(":")
+    script = ENTRY_SCRIPT.format(digest=MARK, module=module, cls=cls,
+                                 model_name=model_name, me_effects=effects,
+                                 me_states=states_for(model_name, effects))
+    return bundle_sources(model_name, model_name, script, 3)
+
+
 @functools.lru_cache(maxsize=None)
 def current_build_id(model_name: str, effects: tuple[str, ...]) -> str:
-    """Hash of what the FMU is made of: the bundled sources, the templates, the launcher, the
-    modelDescription writer and the effect set it is built for."""
-    writer = (PACKAGE_DIR / "fmu" / "model_description.py").read_bytes()
-    extra = [("<entry script 3>", ENTRY_SCRIPT.encode()), ("<runtime init>", RUNTIME_INIT.encode()),
-             ("<launcher 3>", launcher.source_bytes(3)), ("<writer>", writer),
-             ("<effects>", repr(effects).encode())]
-    return sources_digest(runtime_files(model_name, 3) + extra)
-
-
-def _bundle(model_name: str, effects: tuple[str, ...], digest: str) -> dict[str, bytes]:
-    """resources/: the runtime package, the entry script, pythonfmu3's package."""
-    module, cls = FMU_MODELS[model_name].split(":")
-    entries = {f"resources/crankfmu_rt_{digest}/{name}": data
-               for name, data in runtime_files(model_name, 3)}
-    entries[f"resources/crankfmu_rt_{digest}/__init__.py"] = RUNTIME_INIT.format(
-        digest=digest).encode()
-    script = f"crankfmu3_{digest}_{model_name}"
-    entries[f"resources/{script}.py"] = ENTRY_SCRIPT.format(
-        digest=digest, module=module, cls=cls, model_name=model_name, me_effects=effects,
-        me_states=states_for(model_name, effects)).encode()
-    entries["resources/slavemodule.txt"] = script.encode()
-    package = installed_pythonfmu3()
-    for path in sorted(package.glob("*.py")):
-        entries[f"resources/pythonfmu3/{path.name}"] = path.read_bytes()
-    binaries = package / "resources" / "binaries"
-    entries[f"binaries/x86_64-linux/{model_name}.so"] = \
-        (binaries / "x86_64-linux" / "libpythonfmu-export.so").read_bytes()
-    entries[f"binaries/x86_64-windows/{model_name}.dll"] = \
-        (binaries / "x86_64-windows" / "pythonfmu-export.dll").read_bytes()
-    return entries
-
-
-def installed_pythonfmu3() -> Path:
-    """The installed pythonfmu3 package's folder, from its distribution's record: not
-    `pythonfmu3.__file__`, which in a process that has loaded an FMI 3.0 FMU may be the copy in
-    that FMU's resources (pythonfmu3's binary puts them first on sys.path), without binaries."""
-    from importlib.metadata import PackageNotFoundError, distribution
-    try:
-        folder = Path(distribution("pythonfmu3").locate_file("pythonfmu3"))
-    except PackageNotFoundError:
-        raise SystemExit("building FMI 3.0 FMUs needs pythonfmu3 (pip install "
-                         "pythonfmu3==0.3.4)") from None
-    return folder
-
-
-def _unpack_python(entries: dict[str, bytes]) -> str:
-    """A temporary folder with the bundle's Python files, laid out as the FMU's resources/ (to
-    import the entry script as the FMU will)."""
-    tmp = tempfile.mkdtemp(prefix="crankfmu_build3_")
-    for name, data in entries.items():
-        if name.startswith("resources/") and name.endswith(".py"):
-            target = Path(tmp) / name[len("resources/"):]
-            target.parent.mkdir(parents=True, exist_ok=True)
-            target.write_bytes(data)
-    return tmp
+    """The digest of the FMU's bundle (fmu/bundle.py): its version and instantiationToken seed,
+    computed once per process."""
+    return digest_of(catalog_sources3(model_name, effects))
 
 
 def me_card_html(model_name: str, effects: tuple[str, ...]) -> str:
@@ -150,71 +107,34 @@ def me_card_html(model_name: str, effects: tuple[str, ...]) -> str:
 def build_fmu3(model_name: str, dest: Path, effects=None) -> Path:
     """The FMI 3.0 FMU of `model_name` for `effects` (None: the defaults) in dest/; written to
     a temporary file and renamed, so a reader never sees half an FMU."""
+    from .model_description import model_description_fmi3
+
     effects = variant(model_name, effects)
+    marked = catalog_sources3(model_name, effects)
     digest = current_build_id(model_name, effects)
-    entries = _bundle(model_name, effects, digest)
-    tmp, script = _unpack_python(entries), entries["resources/slavemodule.txt"].decode()
-    sys.path.insert(0, tmp)
-    loaded_before = set(sys.modules)
-    try:
-        slave_class = getattr(importlib.import_module(script), model_name)
-        slave_class(instance_name="build", resources=tmp)  # the class must instantiate
-        host = (launcher.host_requirements(), launcher.SEARCH_TEXT)
-        entries["modelDescription.xml"] = model_description_fmi3(slave_class, digest, host)
-    finally:
-        sys.path.remove(tmp)
-        for name in [m for m in sys.modules if digest in m and m not in loaded_before]:
-            del sys.modules[name]
-        shutil.rmtree(tmp, ignore_errors=True)
-    binary = compile_launcher3()
-    launcher.package_binary(entries, model_name, binary, fmi_version=3)
-    entries["documentation/index.html"] = model_card_html(model_name).replace(
-        "</body>", me_card_html(model_name, effects) +
-        launcher.hosting_html(binary is not None, 3) + "</body>").encode()
+    rendered = render(marked, digest)
+    entries = {f"resources/{name}": data for name, data in rendered.items()}
+    with bundle_on_path(marked, digest) as (tmp, _, script):
+        slave_class = getattr(importlib.import_module(script.stem), model_name)
+        slave_class(instance_name="build", resources=str(tmp))  # the class must instantiate
+        entries["modelDescription.xml"] = model_description_fmi3(slave_class, digest, host())
+    binaries = library_folder(3) / "resources" / "binaries"
+    entries[f"binaries/x86_64-linux/{model_name}.so"] = \
+        (binaries / "x86_64-linux" / "libpythonfmu-export.so").read_bytes()
+    entries[f"binaries/x86_64-windows/{model_name}.dll"] = \
+        (binaries / "x86_64-windows" / "pythonfmu-export.dll").read_bytes()
+    card = model_card_html(model_name).replace("</body>", me_card_html(model_name, effects) +
+                                               "</body>")
     dest = Path(dest)
     dest.mkdir(parents=True, exist_ok=True)
     target = dest / fmu_name(model_name, effects)
-    write_fmu_zip(target, entries)
+    pack(target, entries, rendered, model_name, 3, card)
     return target
 
 
-def compile_launcher3() -> bytes | None:
-    return launcher.compile_launcher(3)
-
-
-def write_fmu_zip(target: Path, entries: dict[str, bytes]) -> None:
-    """The FMU file from `entries` (zip name -> bytes): sorted names, fixed timestamps and
-    modes (the same entries give the same bytes), written beside `target` and renamed onto it."""
-    fd, partial = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent)
-    try:
-        with os.fdopen(fd, "wb") as f, zipfile.ZipFile(f, "w", zipfile.ZIP_DEFLATED) as z:
-            for name in sorted(entries):
-                info = zipfile.ZipInfo(name, ZIP_DATE)
-                info.compress_type = zipfile.ZIP_DEFLATED
-                info.external_attr = 0o644 << 16
-                z.writestr(info, entries[name])
-        os.replace(partial, target)
-    except BaseException:
-        Path(partial).unlink(missing_ok=True)
-        raise
-
-
-def _build_id_of(path: Path) -> str | None:
-    from fmpy import read_model_description
-    try:
-        return read_model_description(str(path)).version
-    except Exception:  # an unreadable FMU is rebuilt
-        return None
-
-
-def fmu_for(model_name: str, fmu_dir: Path, effects=None) -> Path:
-    """The FMI 3.0 FMU of a catalog model for `effects` in fmu_dir/fmi3/, built when missing or
-    stale (what a scene's component with fmi = 3 runs)."""
-    chosen = variant(model_name, effects)
-    path = Path(fmu_dir) / FMI3_DIR / fmu_name(model_name, chosen)
-    if not path.is_file() or _build_id_of(path) != current_build_id(model_name, chosen):
-        build_fmu3(model_name, path.parent, chosen)
-    return path
+def fmu_path(model_name: str, fmu_dir: Path, effects=None) -> Path:
+    """Where the FMI 3.0 FMU of a catalog model for `effects` lies: fmu_dir/fmi3/<file>."""
+    return Path(fmu_dir) / FMI3_DIR / fmu_name(model_name, effects)
 
 
 def build_all3(dest: Path, names=None, check: bool = True) -> list[Path]:

@@ -7,20 +7,17 @@ from __future__ import annotations
 
 import atexit
 import ctypes
-import hashlib
 import os
-import shutil
 import sys
-import tempfile
 import time
-import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave, fmi2Real, fmi2ValueReference
+
+from .archive import load_fmu
 
 FMI2_WARNING = 1  # fmi2Status: a call returning more than fmi2Warning failed
 
@@ -75,50 +72,6 @@ def release_pythonfmu_states() -> int:
 
 atexit.register(release_pythonfmu_states)
 
-MAX_FMU_UNPACKED_BYTES = 1 << 30  # an FMU's files together, as its zip directory declares them
-_extracted: dict[str, str] = {}   # sha256 of an FMU file -> its folder, for this process
-
-
-def _remove_extracted() -> None:
-    for folder in _extracted.values():
-        shutil.rmtree(folder, ignore_errors=True)
-    _extracted.clear()
-
-
-atexit.register(_remove_extracted)
-
-
-def extract_fmu(path: Path) -> str:
-    """The FMU unpacked into a private folder (mkdtemp: mode 0700, this user's), one per FMU
-    content for the life of the process, removed at exit. Unpacking an FMU once per process
-    (not once per run) means its binary is loaded once: a shared library is never unloaded
-    here (see FmuInstance.terminate), so a new copy per run would grow the process by the
-    library's size on every run."""
-    if Path(path).stat().st_size > MAX_FMU_UNPACKED_BYTES:
-        raise ValueError(f"larger than the limit of {MAX_FMU_UNPACKED_BYTES} bytes")
-    digest = hashlib.sha256()
-    with open(path, "rb") as f:
-        while chunk := f.read(1 << 20):
-            digest.update(chunk)
-    key = digest.hexdigest()
-    folder = _extracted.get(key)
-    if folder is not None and os.path.isdir(folder):
-        return folder
-    with zipfile.ZipFile(path) as zf:
-        size = sum(i.file_size for i in zf.infolist())
-        if size > MAX_FMU_UNPACKED_BYTES:
-            raise ValueError(f"its files unpack to {size} bytes, more than the limit of "
-                             f"{MAX_FMU_UNPACKED_BYTES} bytes")
-    folder = tempfile.mkdtemp(prefix="crankfmu-fmu-")
-    try:
-        extract(str(path), unzipdir=folder)
-    except BaseException:
-        shutil.rmtree(folder, ignore_errors=True)
-        raise
-    _extracted[key] = folder
-    return folder
-
-
 @dataclass
 class StepStatistics:
     do_step_calls: int = 0
@@ -137,13 +90,11 @@ class FmuInstance:
     def __init__(self, name: str, path: Path, log=None):
         self.name, self.path = name, Path(path)
         self._component = None
-        check_model_description_xml(path)
-        self.model_description = read_model_description(str(path))
+        self.unzip_dir, self.model_description = load_fmu(self.path)
         self.variables = {v.name: v for v in self.model_description.modelVariables}
         cs = self.model_description.coSimulation
         if cs is None:
             raise ValueError("not a co-simulation FMU (no <CoSimulation> element)")
-        self.unzip_dir = extract_fmu(path)
         self.can_rollback = bool(cs.canGetAndSetFMUstate)
         self.slave = FMU2Slave(guid=self.model_description.guid, unzipDirectory=self.unzip_dir,
                                modelIdentifier=cs.modelIdentifier, instanceName=name)
@@ -163,7 +114,7 @@ class FmuInstance:
     def terminate(self) -> None:
         """Terminate and free the instance, but keep the shared library loaded: unloading a
         Python FMU's library while the interpreter lives on crashes it at exit. The unpacked
-        folder stays for the process's other runs (extract_fmu); safe to call twice."""
+        folder stays for the process's other runs (load_fmu); safe to call twice."""
         if self._component is None:
             return
         component, self._component = self._component, None
@@ -238,42 +189,6 @@ class FmuInstance:
 
     def free_state(self, state) -> None:
         self.slave.freeFMUState(state)
-
-
-def check_model_description_xml(path: Path) -> None:
-    """Refuse a modelDescription.xml that a safe parser would not read (fmpy parses it with
-    lxml's defaults, which resolve entities): no DTD, no entities, well-formed, < 64 MiB."""
-    with zipfile.ZipFile(path) as zf:
-        try:
-            info = zf.getinfo("modelDescription.xml")
-        except KeyError:
-            raise ValueError("no modelDescription.xml in the FMU") from None
-        if info.file_size > 64 << 20:
-            raise ValueError(f"modelDescription.xml declares {info.file_size} bytes")
-        data = zf.open(info).read(64 << 20)
-    parse_safe_xml(data, "modelDescription.xml")
-
-
-def parse_safe_xml(data: bytes, what: str):
-    """An XML document parsed without DTD, entities or network access; a document that holds
-    a DOCTYPE is refused (ValueError naming `what`)."""
-    from lxml import etree
-    parser = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False,
-                             dtd_validation=False, huge_tree=False, remove_comments=False)
-    try:
-        root = etree.fromstring(data, parser)
-    except etree.XMLSyntaxError as err:
-        raise UnsafeXml(f"{what} line {err.lineno}", f"not well-formed XML: {err.msg}") from None
-    tree = root.getroottree()
-    if tree.docinfo.doctype or tree.docinfo.internalDTD is not None:
-        raise UnsafeXml(what, "a DOCTYPE (DTD, entities) is not allowed")
-    return root
-
-
-class UnsafeXml(ValueError):
-    def __init__(self, where: str, message: str):
-        self.where, self.message = where, message
-        super().__init__(f"{where}: {message}")
 
 
 class LogCollector:

@@ -14,11 +14,11 @@ import time
 from pathlib import Path
 
 import numpy as np
-from fmpy import read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi3 import FMU3Model, FMU3Slave, fmi3Boolean, fmi3Float64, fmi3ValueReference
 
-from .instance import FmuInstance, StepStatistics, check_model_description_xml, extract_fmu
+from .archive import load_fmu
+from .instance import FmuInstance, StepStatistics
 
 FMI3_WARNING = 1  # fmi3Status: a call returning more than fmi3Warning failed
 CO_SIMULATION, MODEL_EXCHANGE = "CoSimulation", "ModelExchange"
@@ -65,14 +65,12 @@ class Fmu3Instance(FmuInstance):
     def __init__(self, name: str, path: Path, log=None, interface: str = CO_SIMULATION):
         self.name, self.path, self.interface = name, Path(path), interface
         self._component = None
-        check_model_description_xml(path)
-        self.model_description = read_model_description(str(path))
+        self.unzip_dir, self.model_description = load_fmu(self.path)  # checked as FMI 2.0 FMUs
         md = self.model_description
         self.variables = {v.name: v for v in md.modelVariables}
         kind = md.coSimulation if interface == CO_SIMULATION else md.modelExchange
         if kind is None:
             raise ValueError(f"not an FMI 3.0 {interface} FMU (no <{interface}> element)")
-        self.unzip_dir = extract_fmu(path)
         self.can_rollback = bool(kind.canGetAndSetFMUstate)
         cls = FMU3Slave if interface == CO_SIMULATION else FMU3Model
         self.fmu = cls(guid=md.guid, unzipDirectory=self.unzip_dir,

@@ -7,11 +7,10 @@ the physics class, so units, ranges, dependencies and a content-derived GUID are
 """
 from __future__ import annotations
 
-import hashlib
-import uuid
 from xml.etree.ElementTree import Element, SubElement, indent, tostring
 
 from ..runtime.slave_core import DEFAULT_TOLERANCE, derivative_unit, variable_table
+from .bundle import guid as build_guid
 from .units import base_unit_attributes
 
 
@@ -87,9 +86,9 @@ def model_description(slave_class, build_id: str, host: tuple[str, str] | None =
     (requirements, search) for the host annotation (VendorAnnotations), or None."""
     physics = slave_class.physics_class
     table = variable_table(physics)
-    guid = uuid.uuid5(uuid.NAMESPACE_URL, f"crankfmu:{physics.model_name}:{build_id}")
     root = Element("fmiModelDescription", {
-        "fmiVersion": "2.0", "modelName": physics.model_name, "guid": "{%s}" % guid,
+        "fmiVersion": "2.0", "modelName": physics.model_name,
+        "guid": build_guid(physics.model_name, build_id),
         "description": physics.description, "author": "crankfmu",
         "version": build_id, "generationTool": "crankfmu build (pythonfmu 0.7)",
         "variableNamingConvention": "structured", "numberOfEventIndicators": "0"})
@@ -107,13 +106,6 @@ def model_description(slave_class, build_id: str, host: tuple[str, str] | None =
     _model_structure(root, table)
     indent(root)
     return b'<?xml version="1.0" encoding="UTF-8"?>\n' + tostring(root, encoding="utf-8") + b"\n"
-
-
-def sources_digest(files: list[tuple[str, bytes]]) -> str:
-    h = hashlib.sha256()
-    for name, data in sorted(files):
-        h.update(name.encode() + b"\0" + data + b"\0")
-    return h.hexdigest()[:12]
 
 
 # -- FMI 3.0: Co-Simulation and Model Exchange in one modelDescription ----------------------------
@@ -200,10 +192,10 @@ def model_description_fmi3(slave_class, build_id: str, host: tuple[str, str]) ->
     table = variable_table(physics)
     states, slots = tuple(slave_class.me_states), physics.event_slots
     layout = me_layout(len(table), len(states), slots)
-    token = uuid.uuid5(uuid.NAMESPACE_URL, f"crankfmu:fmi3:{physics.model_name}:{build_id}")
     root = Element("fmiModelDescription", {
         "fmiVersion": "3.0", "modelName": physics.model_name,
-        "instantiationToken": "{%s}" % token, "description": physics.description,
+        "instantiationToken": build_guid(physics.model_name, build_id),
+        "description": physics.description,
         "author": "crankfmu", "version": build_id,
         "generationTool": "crankfmu build (pythonfmu3 0.3)",
         "variableNamingConvention": "structured"})

@@ -7,7 +7,6 @@ from pathlib import Path
 from ..errors import MAX_TIME
 from .scene import (Scene, SceneError, _number, check_run_size, parse_scene, set_input,
                     set_value)
-from .ssp_load import load_ssp
 from .swap import read_scene_table
 
 
@@ -16,6 +15,7 @@ def load_scene(path) -> Scene:
     else a TOML scene file."""
     path = Path(path)
     if path.suffix.lower() == ".ssp":
+        from .ssp_load import load_ssp  # lxml and the SSP schema: not on a TOML scene's path
         return load_ssp(path)
     return parse_scene(path, read_scene_table(path))
 

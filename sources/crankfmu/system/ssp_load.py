@@ -19,7 +19,7 @@ from pathlib import Path, PurePosixPath
 
 from lxml import etree
 
-from ..fmu.instance import UnsafeXml, check_model_description_xml, parse_safe_xml
+from ..fmu.archive import UnsafeXml, check_model_description_xml, parse_safe_xml
 from ..fmu.instance3 import is_fmi3, value_type
 from .scene import Scene, SceneError, parse_scene
 from .ssp_export import (FMU_TYPE, NS, OSP_ANNOTATION, PARAMETER_SET_TYPE, SCENE_ANNOTATION,

@@ -7,6 +7,7 @@ variables exist.
 """
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from dataclasses import dataclass
@@ -15,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .scene import Scene, SceneError
+from ..fmu.archive import fmu_file_problem
 from ..fmu.instance import FmuInstance
 from ..fmu.instance3 import CO_SIMULATION, feedthrough, value_type
 
@@ -37,25 +39,32 @@ def resolve_fmu(scene: Scene, comp_name: str, fmu_dir: Path,
     key = f"[components.{comp_name}].fmu"
     if ref.endswith(".fmu"):
         path = (scene.path.parent / ref).resolve()
-        if not path.is_file():
-            raise SceneError(scene.path, key, f"no FMU file at {path}")
+        problem = fmu_file_problem(path)
+        if problem is not None:
+            raise SceneError(scene.path, key, problem)
         _check_fmi_version(scene, comp_name, path)
         return path
-    from ..fmu.build import build_fmu, current_build_id
+    from ..fmu.build import build_fmu, rebuild_reason
     from ..models.catalog import FMU_MODELS
     if ref not in FMU_MODELS:
         raise SceneError(scene.path, key, f"unknown FMU {ref!r}; known: {', '.join(FMU_MODELS)}"
                                           " or a path ending in .fmu")
     if comp.fmi == 3 or model_exchange:
-        from ..fmu.build_fmi3 import fmu_for
-        return fmu_for(ref, fmu_dir, comp.effects if model_exchange else None)
-    path = fmu_dir / f"{ref}.fmu"
-    if not path.is_file() or _build_id(path) != current_build_id(ref):
+        from ..fmu import build_fmi3
+        effects = build_fmi3.variant(ref, comp.effects if model_exchange else None)
+        path = build_fmi3.fmu_path(ref, fmu_dir, effects)
+        rebuild = rebuild_reason(path, ref, 3, build_fmi3.current_build_id(ref, effects))
+        build = functools.partial(build_fmi3.build_fmu3, ref, path.parent, effects)
+    else:
+        path = fmu_dir / f"{ref}.fmu"
+        rebuild = rebuild_reason(path, ref)
+        build = functools.partial(build_fmu, ref, fmu_dir)
+    if rebuild is not None:
         from ..fmu.build import PACKAGE_DIR
-        log.info("building %s (%s) from %s", path, "FMU missing" if not path.is_file() else
-                 "sources changed", PACKAGE_DIR)
+        (log.warning if rebuild.damaged else log.info)(
+            "building %s (%s) from %s", path, rebuild.reason, PACKAGE_DIR)
         warn_if_tree_differs(scene.path.resolve().parent.parent)
-        build_fmu(ref, fmu_dir)
+        build()
     return path
 
 
@@ -103,14 +112,6 @@ def warn_if_tree_differs(tree: Path) -> None:
                     "editable (pip install -e %s)", PACKAGE_DIR, tree / "sources" / "crankfmu",
                     ", ".join(differ[:3]), f" and {len(differ) - 3} more" if len(differ) > 3
                     else "", tree)
-
-
-def _build_id(path: Path) -> str | None:
-    from fmpy import read_model_description
-    try:
-        return read_model_description(str(path)).version
-    except Exception:  # an unreadable FMU is rebuilt
-        return None
 
 
 @dataclass

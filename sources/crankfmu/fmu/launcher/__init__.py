@@ -21,15 +21,9 @@ it out, so its FMUs are byte-identical wherever the builder's environment lies.
 from __future__ import annotations
 
 import functools
-import html
 import os
-import shlex
-import shutil
-import subprocess
 import sys
-import sysconfig
-import tempfile
-from pathlib import Path
+from pathlib import Path  # the others where used: a run reads the sources and names only
 
 HERE = Path(__file__).resolve().parent
 SOURCE = HERE / "launcher.c"        # FMI 2.0
@@ -54,6 +48,8 @@ TESTED_HOSTS = (
 
 def find_compiler() -> list[str] | None:
     """$CC (split like a shell), else the first of cc, gcc, clang on PATH; None if none runs."""
+    import shlex
+    import shutil
     if os.environ.get("CC"):
         cmd = shlex.split(os.environ["CC"])
         return cmd if shutil.which(cmd[0]) else None
@@ -85,6 +81,8 @@ def source_bytes(fmi_version: int = 2) -> bytes:
 @functools.lru_cache(maxsize=8)
 def _compile(compiler: tuple[str, ...], files: tuple[tuple[str, bytes], ...]) -> bytes:
     """The shared object compiled from `files` (the first is the main file)."""
+    import subprocess
+    import tempfile
     with tempfile.TemporaryDirectory(prefix="crankfmu_launcher_") as tmp:
         for name, data in files:
             (Path(tmp) / name).write_bytes(data)
@@ -112,6 +110,7 @@ def compile_launcher(fmi_version: int = 2) -> bytes | None:
 
 
 def python_version() -> str:
+    import sysconfig
     return sysconfig.get_config_var("py_version_short") or \
         f"{sys.version_info[0]}.{sys.version_info[1]}"
 
@@ -164,6 +163,7 @@ SEARCH_TEXT = (
 
 def hosting_html(launcher: bool, fmi_version: int = 2) -> str:
     """The model card's section "Using the FMUs in other tools"."""
+    import html
     version = python_version()
     api = "fmi2Instantiate" if fmi_version == 2 else \
         "fmi3InstantiateCoSimulation/fmi3InstantiateModelExchange"

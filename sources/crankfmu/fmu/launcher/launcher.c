@@ -11,8 +11,10 @@
  *      The interpreter started here is never finalized (a host may still run FMU code in its
  *      own exit handlers).
  *   2. Pre-flight: before the first instance, the packages the runtime needs (numpy, scipy) are
- *      imported; if one is missing, fmi2Instantiate returns NULL and logs what is missing, in
- *      which Python, and how to point the FMU at another environment.
+ *      looked up (importlib.util.find_spec: found, not imported; scipy is off the default path,
+ *      and importing it cost every process ~10 ms); if one is missing, fmi2Instantiate returns
+ *      NULL and logs what is missing, in which Python, and how to point the FMU at another
+ *      environment.
  *   3. Forwarding: every fmi2 function goes to the pythonfmu binary. The launcher keeps a small
  *      instance record around pythonfmu's component:
  *      - logging: pythonfmu logs nothing unless loggingOn; the launcher instantiates it with

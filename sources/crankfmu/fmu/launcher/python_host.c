@@ -38,7 +38,7 @@ typedef struct {
     char model[256];        /* modelIdentifier: pythonfmu's binary is <model>_<suffix>.so */
     char python[TEXT];      /* the builder's python executable ("" in a portable build) */
     char version[32];       /* e.g. 3.11 */
-    char requires[TEXT];    /* packages imported before the first instance, space separated */
+    char requires[TEXT];    /* packages looked up before the first instance, space separated */
 } Config;
 
 /* ---- Python C API, looked up at run time ---------------------------------------------------- */
@@ -149,7 +149,10 @@ static int bind_python(void *lib, const char *where, const char *version, char *
 /* ---- the search ------------------------------------------------------------------------------ */
 /* What a candidate says about itself: run once with the packages as arguments; prints its
  * version, its sys.executable, its shared libpython ("" if none) and the packages it cannot
- * import with the reason ("" if none). */
+ * import with the reason ("" if none). The probe imports them (in its own process, once per
+ * candidate, in a host without Python only), so that a candidate whose package is there but
+ * broken is passed over for the next; the pre-flight in the chosen interpreter only looks them
+ * up. */
 static const char PROBE[] =
     "import os, sys, sysconfig\n"
     "c = sysconfig.get_config_var\n"
@@ -337,14 +340,17 @@ static int ensure_python(const Config *cfg, char *error, size_t size) {
     return 1;
 }
 
-/* Import the packages the runtime needs; on failure write what is missing into `error`. */
+/* Find the packages the runtime needs (find_spec: found, not imported, so a run that does not
+ * use scipy does not pay for its import); on failure write what is missing into `error`. */
 static int preflight(const Config *cfg, char *error, size_t size) {
     static const char code[] =
         "import sys\n"
+        "from importlib.util import find_spec\n"
         "missing = []\n"
         "for name in requires.split():\n"
         "    try:\n"
-        "        __import__(name)\n"
+        "        if find_spec(name) is None:\n"
+        "            missing.append(f'{name} (ModuleNotFoundError: No module named {name!r})')\n"
         "    except Exception as err:\n"
         "        missing.append(f'{name} ({type(err).__name__}: {err})')\n"
         "message = ''\n"
