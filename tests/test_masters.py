@@ -261,4 +261,4 @@ def test_taylor_rows_hold_a_constant_exactly():
     from crankfmu.masters.base import taylor_rows
 
     rows = taylor_rows((0.0, -1e-3, -2e-3), np.array([[0.05, 572.0]] * 3))
-    assert rows[0].tolist() == [0.05, 572.0] and not np.any(rows[1:])
+    assert rows[0] == [0.05, 572.0] and not np.any(rows[1:])

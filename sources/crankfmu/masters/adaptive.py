@@ -22,7 +22,7 @@ from __future__ import annotations
 import bisect
 import warnings
 
-from .base import Master
+from .base import Master, evaluate
 from .inputs import edge_reading_time, step_edges, step_to
 from .options import EXTRAPOLATION, TOLERANCE, Option, OptionError
 
@@ -63,6 +63,8 @@ class Adaptive(Master):
         """h, shortened (or stretched by less than min_step) so that the step ends at the first
         input edge after t if it would cross it: t + h >= edge in floats, so the next step's
         start reads the new value (InputSignal.value_at holds it from the edge on)."""
+        if not self.edges:
+            return h
         i = bisect.bisect_right(self.edges, edge_reading_time(t))  # as value_at reads
         if i == len(self.edges) or t + h < self.edges[i] - self.min_step:
             return h
@@ -74,9 +76,8 @@ class Adaptive(Master):
         states = self.save_states()
         coefficients = self.source_coefficients(t, order)
         rows = {c: coefficients[c] for c in self.system.order}  # the same rows as the sweep's
-        as_floats = {c: r.tolist() for c, r in rows.items()}
         while True:
-            predicted = {c: _evaluate(r, h) for c, r in as_floats.items()}
+            predicted = {c: evaluate(r, h) for c, r in rows.items()}
             self.sequential_sweep(t, h, self.extrapolation, rows)
             error = self._error(predicted)
             factor = SAFETY * error ** (-1.0 / (order + 1)) if error > 0 else MAX_FACTOR
@@ -91,15 +92,13 @@ class Adaptive(Master):
         return h
 
     def _error(self, predicted: dict) -> float:
-        """In Python floats (a few values per component): the operations of the numpy form
-        max(|y - P| / (tolerance * scale)), so the same floats; a NaN makes a component's
-        error NaN, as numpy's max does."""
+        """max(|y - P| / (tolerance * scale)) over the connected outputs; a NaN makes a
+        component's error NaN, as numpy's max does."""
         errors = []
         tolerance = self.tolerance
-        for c, y in self.system.outputs.items():
-            if not y.size:
+        for c, values in self.system.outputs.items():
+            if not values:
                 continue
-            values = y.tolist()
             worst = -1.0
             for v, p, s in zip(values, predicted[c], self.scales.of_floats(c, values)):
                 e = abs(v - p) / (tolerance * s)
@@ -124,13 +123,3 @@ class Adaptive(Master):
                               f"ones are counted in the statistics: accepted_above_tolerance)",
                               RuntimeWarning, stacklevel=2)
 
-
-def _evaluate(rows: list, s: float) -> list[float]:
-    """masters.history.evaluate on Taylor rows as lists: the same operations, so the same
-    floats."""
-    if len(rows) == 1:
-        return rows[0]
-    if len(rows) == 2:
-        return [a + b * s for a, b in zip(*rows)]
-    c = 0.5 * s * s
-    return [a + b * s + d * c for a, b, d in zip(*rows)]
