@@ -139,6 +139,24 @@ def test_a_master_redefining_a_key_is_refused():
     assert "clash" not in MASTERS
 
 
+def test_a_master_may_default_a_shared_key_on_its_own(tmp_path):
+    """The adaptive master's tolerance default (1e-2) differs from the shared one (1e-6, the
+    iterative master's): the scene reads the chosen master's, the sidecar's table shows it, and
+    a master whose own default its option would refuse cannot be registered."""
+    scene = load_scene(scene_file(tmp_path, {"algorithm": "adaptive"}, OSCILLATOR, 0.05, None))
+    assert scene.master.tolerance == 1e-2 == scene.master.resolved()["tolerance"]
+    scene.master.algorithm = "iterative"
+    assert scene.master.tolerance == all_options()["tolerance"].default == 1e-6
+
+    class Loose(IteratedGaussSeidel):
+        name = "loose"
+        defaults = {"sweeps": 0}
+
+    with pytest.raises(ValueError, match="master loose: its default sweeps = 0 is not"):
+        register(Loose)
+    assert "loose" not in MASTERS
+
+
 def test_option_checks_name_what_is_allowed():
     step = Option("min_step", float, "s", 1e-6, "smallest step", positive=True)
     for value, words in ((0.0, "must be > 0, got 0.0"), (float("nan"), "must be a finite number"),

@@ -10,6 +10,9 @@ A new master is one file with a `Master` subclass and one line in MASTERS
                       allowed range, help; crankfmu.masters.options). The scene, the
                       command line, the Python API, SSP files and the sidecar read them from
                       here; the master reads the checked values with `self.option(name)`.
+    defaults          (optional) {key: value}: this master's own default for an option it
+                      shares with other masters, where the shared default does not fit it (the
+                      adaptive master's tolerance); the key keeps its meaning, type and range.
     _step(t, h)       advance every FMU from t; on return every FMU is at t + taken and
                       `system.outputs` holds the connected outputs at t + taken, and
                       `self.seen[comp]` = (rows, taken): the inputs each FMU saw over the step
@@ -66,6 +69,7 @@ __all__ = ["Coefficients", "DivergenceError", "HISTORY_DEPTH", "History", "Maste
 class Master:
     name = "base"
     options: tuple[Option, ...] = ()
+    defaults: dict = {}        # own defaults of shared options (see the module's docstring)
     needs_rollback = False
     variable_step = False
     startup_corrector = False  # fixed-step masters: see _corrected_first_step
@@ -97,17 +101,22 @@ class Master:
     # -- options --------------------------------------------------------------------------
     @classmethod
     def read_options(cls, settings) -> dict:
-        """{key: checked value} of this master's options (the declared default where the
-        settings give none); OptionError names the key."""
+        """{key: checked value} of this master's options (its default where the settings give
+        none); OptionError names the key."""
         values = {}
         for option in cls.options:
             try:
                 values[option.name] = option.check(getattr(settings, option.name,
-                                                           option.default))
+                                                           cls.default(option)))
             except OptionError as err:
                 raise OptionError(f"[master].{option.name}: {err}") from None
         cls.check_options(values)
         return values
+
+    @classmethod
+    def default(cls, option: Option):
+        """This master's default for `option`: its own (`defaults`), else the declared one."""
+        return cls.defaults.get(option.name, option.default)
 
     @classmethod
     def check_options(cls, values: dict) -> None:
