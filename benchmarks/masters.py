@@ -195,20 +195,23 @@ def crankfmu_seconds(scene, algorithm: str, extrapolation: int, n: int) -> tuple
     return cpu[1] - cpu[0], steps[1] - steps[0]
 
 
-def csv_seconds(scene, n: int, out: Path) -> float:
+def csv_seconds(scene, n: int, out: Path, repeats: int = 5) -> float:
     """CPU per row of writing the run's CSV (Gauss-Seidel, extrapolation 0, a row per step):
-    the runner with `out` minus without, both of n steps."""
+    the runner with `out` minus without, both of n steps (median of `repeats`)."""
     from crankfmu.cosim.runner import RunOptions, run_scene
 
-    cpu = []
-    for options in (RunOptions(out=None, progress=False),
-                    RunOptions(out=out / "noop.csv", progress=False)):
-        trial = copy.deepcopy(scene)
-        trial.stop_time = trial.start_time + n * trial.master.step
-        start = CLOCK()
-        run_scene(trial, options)
-        cpu.append(CLOCK() - start)
-    return (cpu[1] - cpu[0]) / n
+    per_row = []
+    for _ in range(repeats):
+        cpu = []
+        for options in (RunOptions(out=None, progress=False),
+                        RunOptions(out=out / "noop.csv", progress=False)):
+            trial = copy.deepcopy(scene)
+            trial.stop_time = trial.start_time + n * trial.master.step
+            start = CLOCK()
+            run_scene(trial, options)
+            cpu.append(CLOCK() - start)
+        per_row.append((cpu[1] - cpu[0]) / n)
+    return statistics.median(per_row)
 
 
 class BareFmu:
