@@ -44,7 +44,9 @@ The base class composes parts that are each testable alone:
     scale.ErrorScale, check_finite  what tolerances are relative to; divergence
 and provides `initialize(t0)`, the public `step(t, h)` (calls `_step`, then keeps the
 communication-point history and the port energies), the two sweeps (`parallel_sweep`: Jacobi,
-`sequential_sweep`: Gauss-Seidel), and statistics per FMU.
+`sequential_sweep`: Gauss-Seidel), and statistics per FMU. The sweeps run each FMU's gather and
+advance functions made once at construction (the ones `gather` and `advance_component` call),
+not those methods: a master that needs other inputs overrides the sweep or writes its own.
 
 Inputs over a step are polynomials of degree <= 2, given as Taylor rows at the step start
 (value, first and second derivative): a list of rows, each a sequence of Python floats with one
