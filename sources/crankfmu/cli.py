@@ -36,10 +36,12 @@ def add_master_options(p: argparse.ArgumentParser) -> None:
                    help="master algorithm ([master].algorithm)")
     for option in all_options().values():  # each master's own options, from its declaration
         takers = [n for n, c in MASTERS.items() if option in c.options]
+        own = "".join(f"; {n}'s default {c.defaults[option.name]:g}" for n, c in MASTERS.items()
+                      if option.name in c.defaults)
         p.add_argument(f"--{option.name.replace('_', '-')}", type=option.kind,
                        choices=option.choices, dest=f"master_{option.name}",
                        metavar=None if option.choices else option.name.upper(),
-                       help=f"{option.describe()} (masters: {', '.join(takers)}; "
+                       help=f"{option.describe()}{own} (masters: {', '.join(takers)}; "
                             f"[master].{option.name})")
     p.add_argument("--fmu-tolerance", type=float,
                    help="each FMU's internal relative tolerance ([master].fmu_tolerance)")

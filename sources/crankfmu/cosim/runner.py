@@ -127,14 +127,21 @@ def _recorder(scene: Scene, fmus) -> tuple[Recorder, list]:
     for comp in dict.fromkeys(r.split(".", 1)[0] for r in names):
         vars_ = [r.split(".", 1)[1] for r in names if r.split(".", 1)[0] == comp]
         readers.append((fmus[comp].reader(vars_), [names.index(f"{comp}.{v}") for v in vars_]))
+    if [k for _, where in readers for k in where] == list(range(len(names))):
+        readers = [(read, None) for read, _ in readers]  # the usual case: the row in order
     return Recorder(names, [normalize_unit(u) for u in units]), readers
 
 
 def _sample(recorder: Recorder, readers, t: float) -> None:
-    row = [0.0] * len(recorder.names)
-    for read, where in readers:
-        for k, v in zip(where, read().tolist()):  # Python floats: cheaper than numpy scalars
-            row[k] = v
+    if readers and readers[0][1] is None:  # each reader's values in turn make the row
+        row = []
+        for read, _ in readers:
+            row += read()  # a list of Python floats
+    else:
+        row = [0.0] * len(recorder.names)
+        for read, where in readers:
+            for k, v in zip(where, read()):
+                row[k] = v
     if not math.isfinite(sum(row)):  # NaN or inf somewhere (or an overflowing sum): find it
         for name, v in zip(recorder.names, row):
             if not math.isfinite(v):
@@ -445,12 +452,16 @@ def _fixed_steps(master, scene: Scene, progress):
     n_steps = max(1, math.ceil((stop - t0) / h - 1e-9))
     every = max(1, round((scene.record_interval or h) / h))
     edges = step_edges(master.system)
+    advance = master.step
     for step in _progress(range(1, n_steps + 1), progress, scene.name):
         t = t0 + (step - 1) * h
-        start = t
-        for piece in split_at_edges(t, min(h, stop - t), edges):
-            master.step(start, piece)
-            start += piece
+        if edges:
+            start = t
+            for piece in split_at_edges(t, min(h, stop - t), edges):
+                advance(start, piece)
+                start += piece
+        else:  # no step table: the grid step whole (what split_at_edges gives)
+            advance(t, min(h, stop - t))
         yield step, t, min(t0 + step * h, stop), step % every == 0 or step == n_steps
 
 

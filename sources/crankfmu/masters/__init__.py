@@ -54,6 +54,13 @@ def all_options() -> dict[str, Option]:
 _ALL_OPTIONS: list = [None, {}]  # [the MASTERS classes it was made from, the options]
 
 
+def option_default(algorithm: str, option: Option):
+    """The default of `option` for the master `algorithm` (its own where it declares one; the
+    option's declared default for an unknown algorithm)."""
+    cls = MASTERS.get(algorithm)
+    return option.default if cls is None else cls.default(option)
+
+
 def make_master(algorithm: str, system, settings) -> Master:
     try:
         cls = MASTERS[algorithm]
@@ -72,6 +79,16 @@ def _check_declaration(cls, masters) -> None:
             if theirs is not None and theirs != option:
                 raise ValueError(f"master {cls.name}: option {option.name} differs from "
                                  f"master {other.name}'s (a key means one thing)")
+    own = {o.name: o for o in cls.options}
+    for key, value in cls.defaults.items():
+        if key not in own:
+            raise ValueError(f"master {cls.name}: a default for {key}, which is not one of its "
+                             f"options")
+        try:
+            own[key].check(value)
+        except OptionError as err:
+            raise ValueError(f"master {cls.name}: its default {key} = {value!r} is not "
+                             f"allowed: {err}") from None
 
 
 def _show(value) -> str:
@@ -83,4 +100,4 @@ for _cls in MASTERS.values():
     _check_declaration(_cls, MASTERS)
 
 __all__ = ["DivergenceError", "Master", "MASTERS", "Option", "OptionError", "all_options",
-           "make_master", "master_class", "register"]
+           "make_master", "master_class", "option_default", "register"]

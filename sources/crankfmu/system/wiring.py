@@ -13,8 +13,6 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from .scene import Scene, SceneError
 from ..fmu.archive import fmu_file_problem
 from ..fmu.instance import FmuInstance
@@ -306,7 +304,8 @@ class System:
                                for l in links if l.target == c] for c in fmus}
         self.read_outputs = {c: fmus[c].reader(self.out_names[c]) for c in fmus}
         self.write_inputs = {c: fmus[c].writer(self.in_names[c]) for c in fmus}
-        self.outputs = {c: np.zeros(len(self.out_names[c])) for c in fmus}
+        # each component's connected outputs as a list of floats, replaced at every read
+        self.outputs = {c: [0.0] * len(self.out_names[c]) for c in fmus}
         self.external = {c: [(s.target.split(".", 1)[1], s) for s in scene.inputs.values()
                              if s.target.split(".", 1)[0] == c] for c in fmus}
         self.write_external = {c: fmus[c].writer([n for n, _ in self.external[c]]) for c in fmus}
@@ -314,11 +313,13 @@ class System:
         self.external_varies = {c: any(len(s.times) > 1 for _, s in self.external[c])
                                 for c in fmus}
 
-    def refresh_outputs(self, comp: str) -> np.ndarray:
-        self.outputs[comp] = self.read_outputs[comp]().copy()
-        return self.outputs[comp]
+    def refresh_outputs(self, comp: str) -> list[float]:
+        """Read comp's connected outputs into a new list (the masters' history keeps the
+        old one)."""
+        values = self.outputs[comp] = self.read_outputs[comp]()
+        return values
 
-    def gather_inputs(self, comp: str, outputs: dict[str, np.ndarray] | None = None) -> list[float]:
+    def gather_inputs(self, comp: str, outputs: dict | None = None) -> list[float]:
         outputs = self.outputs if outputs is None else outputs
         return [outputs[src][k] for src, k in self.in_sources[comp]]
 
