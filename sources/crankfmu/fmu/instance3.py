@@ -13,7 +13,6 @@ import ctypes
 import time
 from pathlib import Path
 
-import numpy as np
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi3 import FMU3Model, FMU3Slave, fmi3Boolean, fmi3Float64, fmi3ValueReference
 
@@ -102,19 +101,21 @@ class Fmu3Instance(FmuInstance):
                                                    for v in names])
 
     def reader(self, names: list[str]):
-        """A function returning the current values of `names` as a numpy array (a view of one
-        reused buffer: copy it to keep it)."""
+        """A function returning the current values of `names` as a new list of Python floats
+        (as FmuInstance.reader: a master keeps what it reads)."""
         n = len(names)
+        if not n:
+            return list  # nothing to read: a new empty list per call
         vrs = self.value_references(names)
         buf = (fmi3Float64 * n)()
-        out = np.ctypeslib.as_array(buf) if n else np.zeros(0)
+        values = memoryview(buf).cast("B").cast("d")
         get = self._functions["fmi3GetFloat64"]
 
-        def read() -> np.ndarray:
-            status = get(self._component, vrs, n, buf, n) if n else 0
+        def read() -> list[float]:
+            status = get(self._component, vrs, n, buf, n)
             if status > FMI3_WARNING:
                 raise FMICallException(function="fmi3GetFloat64", status=status)
-            return out
+            return values.tolist()
         return read
 
     def writer(self, names: list[str]):
@@ -122,12 +123,11 @@ class Fmu3Instance(FmuInstance):
         n = len(names)
         vrs = self.value_references(names)
         buf = (fmi3Float64 * n)()
-        view = np.ctypeslib.as_array(buf) if n else None
         setter = self._functions["fmi3SetFloat64"]
 
         def write(values) -> None:
             if n:
-                view[:] = values
+                buf[:] = values
                 status = setter(self._component, vrs, n, buf, n)
                 if status > FMI3_WARNING:
                     raise FMICallException(function="fmi3SetFloat64", status=status)
