@@ -169,8 +169,10 @@ def _run_target(scene, out: Path, args) -> int:
     m = result.metadata["master"]
     knob = f"tolerance {report.tolerance:g}" if m["step"] != report.step or \
         m["algorithm"] == "adaptive" else f"step {m['step']:g} s"
-    print(f"{scene.name}: target {report.target:g} met by {m['algorithm']}, extrapolation "
-          f"{m.get('extrapolation')}, {knob}; the search ran {len(report.runs)} runs in "
+    coupling = f"taylor {m['taylor']}" if m.get("taylor") else \
+        f"extrapolation {m.get('extrapolation')}"
+    print(f"{scene.name}: target {report.target:g} met by {m['algorithm']}, {coupling}, "
+          f"{knob}; the search ran {len(report.runs)} runs in "
           f"{report.wall_seconds:.2f} s wall")
     _print_run(scene, result, report.estimate)
     return 0

@@ -1,6 +1,7 @@
 """`crankfmu accuracy SCENE.toml`: what accuracy costs in wall time, per master setting.
 
-Sweeps algorithm x extrapolation x communication step (x FMU tolerance), compares every run with
+Sweeps algorithm x coupling (extrapolation, or a Taylor coupling's order where the FMUs offer
+output derivatives) x communication step (x FMU tolerance), compares every run with
 the monolithic reference (solved once, cached in --out DIR), and prints a table, the observed
 convergence orders and the cheapest setting meeting --target; writes accuracy.csv and
 work_precision.png into --out DIR. Each run is printed as it finishes (under a progress bar
@@ -26,7 +27,8 @@ def _names(text: str) -> list[str]:
 
 
 def register(sub) -> None:
-    from ..studies.accuracy import DEFAULT_STEP_FACTORS, DEFAULT_TARGET, DEFAULT_TOLERANCES, METRICS
+    from ..studies.accuracy import (DEFAULT_STEP_FACTORS, DEFAULT_TARGET, DEFAULT_TAYLORS,
+                                    DEFAULT_TOLERANCES, METRICS)
     from ..cli import add_fmu_option, add_output_options, add_scene_options
 
     p = sub.add_parser("accuracy", help="error vs wall time of master settings against the "
@@ -38,6 +40,11 @@ def register(sub) -> None:
     p.add_argument("--algorithms", type=_names,
                    help="comma list (default: every available master)")
     p.add_argument("--extrapolations", type=_ints, help="comma list of 0, 1, 2 (default all)")
+    p.add_argument("--taylors", type=_ints,
+                   help="Taylor coupling orders ([master].taylor) for the masters that take it, "
+                        "comma list of 1 .. 4, 0 for none (default without --algorithms: "
+                        + ",".join(map(str, DEFAULT_TAYLORS)) + " where every FMU with "
+                        "connected outputs offers their derivatives; else none)")
     p.add_argument("--steps", type=_floats,
                    help="communication steps [s], comma list (default: the scene's step x "
                         + ", ".join(f"{f:g}" for f in DEFAULT_STEP_FACTORS) + ")")
@@ -86,6 +93,7 @@ def run_accuracy_command(args) -> int:
         out_dir=args.out or Path("results") / f"{scene.name}_accuracy",
         algorithms=args.algorithms,
         extrapolations=args.extrapolations or [0, 1, 2],
+        taylors=None if args.taylors is None else [q for q in args.taylors if q],
         steps=args.steps,
         fmu_tolerances=args.fmu_tolerances, metric=args.metric, variables=args.variables,
         cycles=args.cycles, target=args.target, reference_rtol=args.rtol,
@@ -152,6 +160,8 @@ def _check_options(o) -> None:
                           f"{', '.join(MASTERS)}")
     if any(x not in (0, 1, 2) for x in o.extrapolations):
         raise OptionError(f"--extrapolations: {o.extrapolations}: each must be 0, 1 or 2")
+    if any(q not in (1, 2, 3, 4) for q in o.taylors or []):
+        raise OptionError(f"--taylors: {o.taylors}: each must be 0 (none), 1, 2, 3 or 4")
     for name, values in (("--steps", o.steps), ("--tolerances", o.tolerances),
                          ("--fmu-tolerances", o.fmu_tolerances), ("--target", [o.target]),
                          ("--rtol", [o.reference_rtol])):
@@ -166,7 +176,8 @@ def _print_choice(what: str, o, target: float) -> None:
         print(f"{what} meeting --target {target:g}: none of the runs")
         return
     s = o.setting
-    print(f"{what} meeting --target {target:g}: --algorithm {s.algorithm} --extrapolation "
-          f"{s.extrapolation} --step {s.step:g} --fmu-tolerance {s.fmu_tolerance:g}"
+    coupling = f"--taylor {s.taylor}" if s.taylor else f"--extrapolation {s.extrapolation}"
+    print(f"{what} meeting --target {target:g}: --algorithm {s.algorithm} {coupling} "
+          f"--step {s.step:g} --fmu-tolerance {s.fmu_tolerance:g}"
           + (f" --tolerance {s.tolerance:g}" if o.knob == "tolerance" else "")
           + f" (error {o.error:.2e}, {o.wall_seconds:.2f} s, {o.do_steps} doStep calls)")

@@ -8,8 +8,9 @@ difference between the run and its companion is d = |e(r x) - e(x)| ~ |r^p - 1| 
 
     estimate = d / |r^p - 1|.
 
-`crankfmu run`: one finer companion, at h/2 (fixed step, p = p0 = extrapolation + 1: the
-estimate is d 2^p / (2^p - 1), between 1.07 d and 2 d whatever p is) or at a tenth of a
+`crankfmu run`: one finer companion, at h/2 (fixed step, p = p0 = extrapolation + 1, or
+taylor + 1 for a Taylor coupling: the estimate is d 2^p / (2^p - 1), between 1.03 d and 2 d
+whatever p is) or at a tenth of a
 variable-step master's tolerance (p = 1: about 1.1 d). The finer run is nearer the asymptotic
 range than the run, so d measures the run's own error; coarse companions (2h and 4h, the order
 observed from the three runs) were cheaper but off more often: scripts/error_estimate.py
@@ -70,22 +71,26 @@ class Estimate:
                 "companion_seconds": self.companion_seconds, "reason": self.reason}
 
 
-def nominal_order(extrapolation: int) -> float:
-    """The fixed-step masters' design order: extrapolation p gives global order p + 1."""
-    return float(extrapolation + 1)
+def nominal_order(extrapolation: int, taylor: int = 0) -> float:
+    """The fixed-step masters' design order: extrapolation p gives global order p + 1, a Taylor
+    coupling of order q ([master].taylor, masters/taylor.py) q + 1 (measured on the two-mass
+    oscillator: tests/test_taylor_coupling.py)."""
+    return float(taylor + 1 if taylor else extrapolation + 1)
 
 
-def order_rule(variable_step: bool, extrapolation: int) -> tuple[float, tuple | None]:
+def order_rule(variable_step: bool, extrapolation: int, taylor: int = 0
+               ) -> tuple[float, tuple | None]:
     """(order, bounds of an observed order) of `crankfmu run`'s estimator: one companion, so
-    the order is the design order p0 = extrapolation + 1 (fixed step) or 1 (variable step)."""
-    return (1.0 if variable_step else nominal_order(extrapolation)), None
+    the order is the design order p0 (fixed step) or 1 (variable step: the error follows the
+    tolerance, whatever the coupling)."""
+    return (1.0 if variable_step else nominal_order(extrapolation, taylor)), None
 
 
-def coarse_bounds(extrapolation: int) -> tuple[float, float]:
+def coarse_bounds(extrapolation: int, taylor: int = 0) -> tuple[float, float]:
     """Bounds of the order observed from companions at 2h and 4h (the --target search):
     [p0, p0 + 1] (Gauss-Seidel and the iterative master gain an order on some scenes; outside
     that range the observed ratio was noise: scripts/error_estimate.py)."""
-    p0 = nominal_order(extrapolation)
+    p0 = nominal_order(extrapolation, taylor)
     return p0, p0 + 1.0
 
 

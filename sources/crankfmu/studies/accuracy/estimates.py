@@ -63,7 +63,8 @@ def add_estimates(outcomes: list[Outcome], metric, runs_dir: Path) -> None:
             continue
         variable = is_variable_step(s.algorithm)
         knob, ratio, _ = companion_knobs(variable, s.step, s.tolerance)
-        est = richardson(metric, series, ratio, knob, *order_rule(variable, s.extrapolation))
+        est = richardson(metric, series, ratio, knob,
+                         *order_rule(variable, s.extrapolation, s.taylor))
         o.extra["estimated_error"] = est.error if est.ok else None
         if not est.ok:
             o.extra["estimate_reason"] = est.reason

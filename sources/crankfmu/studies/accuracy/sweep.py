@@ -44,11 +44,18 @@ class Setting:
     step: float           # s, communication step (initial step of a variable-step master)
     fmu_tolerance: float
     tolerance: float      # the iterative/adaptive masters' own tolerance
+    taylor: int = 0       # a Taylor coupling's order ([master].taylor; then extrapolation 0)
 
     @property
     def label(self) -> str:
-        return (f"{self.algorithm}_x{self.extrapolation}_h{self.step:g}_ft{self.fmu_tolerance:g}"
+        coupling = f"_t{self.taylor}" if self.taylor else f"_x{self.extrapolation}"
+        return (f"{self.algorithm}{coupling}_h{self.step:g}_ft{self.fmu_tolerance:g}"
                 f"_tol{self.tolerance:g}")
+
+    @property
+    def coupling(self) -> str:
+        """How the inputs over a step are made: "extrapolation p" or "taylor q"."""
+        return f"taylor {self.taylor}" if self.taylor else f"extrapolation {self.extrapolation}"
 
 
 @dataclass
@@ -77,7 +84,8 @@ class Outcome:
 
     def to_json(self) -> dict:
         s = self.setting
-        return {"setting": [s.algorithm, s.extrapolation, s.step, s.fmu_tolerance, s.tolerance],
+        return {"setting": [s.algorithm, s.extrapolation, s.step, s.fmu_tolerance, s.tolerance,
+                            s.taylor],
                 "knob": self.knob, "error": self.error if math.isfinite(self.error) else None,
                 "wall_seconds": self.wall_seconds, "do_steps": self.do_steps,
                 "rollbacks": self.rollbacks, "communication_steps": self.communication_steps,
@@ -112,19 +120,25 @@ def is_monolithic(algorithm: str) -> bool:
 
 
 def settings_for(scene, algorithms, extrapolations, steps, fmu_tolerances,
-                 tolerances) -> list[Setting]:
+                 tolerances, taylors=()) -> list[Setting]:
+    """Every algorithm x coupling (each extrapolation, then each Taylor order for a master that
+    declares the option) x FMU tolerance x step (or tolerance of a variable-step master)."""
+    from ...masters import MASTERS
     out = []
     for alg in algorithms:
         if is_monolithic(alg):
             out.append(Setting(alg, 0, scene.master.step, fmu_tolerances[0],
                                scene.master.tolerance))
             continue
-        for ex in extrapolations:
+        declared = {o.name for o in getattr(MASTERS.get(alg), "options", ())}
+        couplings = [(ex, 0) for ex in extrapolations] + \
+            [(0, q) for q in taylors if "taylor" in declared]
+        for ex, q in couplings:
             for ft in fmu_tolerances:
                 if is_variable_step(alg):
-                    out += [Setting(alg, ex, scene.master.step, ft, tol) for tol in tolerances]
+                    out += [Setting(alg, ex, scene.master.step, ft, tol, q) for tol in tolerances]
                 else:
-                    out += [Setting(alg, ex, h, ft, scene.master.tolerance) for h in steps]
+                    out += [Setting(alg, ex, h, ft, scene.master.tolerance, q) for h in steps]
     return out
 
 
@@ -214,6 +228,8 @@ def trial_scene(scene, setting: Setting):
     m = trial.master
     m.algorithm, m.extrapolation, m.step = setting.algorithm, setting.extrapolation, setting.step
     m.fmu_tolerance, m.tolerance = setting.fmu_tolerance, setting.tolerance
+    if setting.taylor:
+        m.taylor = setting.taylor
     return trial
 
 
@@ -358,13 +374,14 @@ def _counts(statistics: dict) -> tuple[int, int]:
 
 # -- summaries -----------------------------------------------------------------------------------
 def orders(outcomes: list[Outcome], floor_factor: float = FLOOR_FACTOR) -> dict:
-    """Observed order per (algorithm, extrapolation, fmu_tolerance): slope of log error over log
-    step (log tolerance for a variable-step master) over the errors above floor_factor x the FMU
-    tolerance. Values: (order, points used, knob)."""
+    """Observed order per (algorithm, coupling, fmu_tolerance) (coupling: Setting.coupling,
+    "extrapolation p" or "taylor q"): slope of log error over log step (log tolerance for a
+    variable-step master) over the errors above floor_factor x the FMU tolerance. Values:
+    (order, points used, knob)."""
     groups: dict[tuple, list[Outcome]] = {}
     for o in outcomes:
         s = o.setting
-        groups.setdefault((s.algorithm, s.extrapolation, s.fmu_tolerance), []).append(o)
+        groups.setdefault((s.algorithm, s.coupling, s.fmu_tolerance), []).append(o)
     result = {}
     for key, group in groups.items():
         if is_monolithic(key[0]):  # one run: no order to observe
