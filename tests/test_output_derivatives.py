@@ -228,3 +228,23 @@ def test_companions_come_after_every_earlier_value_reference(name):
              + [f"{n}_d{k}" for k in range(1, MAX_OUTPUT_DERIVATIVE + 1)
                 for n in cls.derivative_outputs])
     assert table == earlier + later
+
+
+@pytest.mark.parametrize("name", FMU_MODELS)
+def test_fmi3_keeps_its_model_exchange_references_and_puts_the_companions_after(fmi3_dir,
+                                                                                name):
+    """The FMI 3.0 FMU: the base table at the FMI 2.0 value references, then time, the states,
+    their derivatives and the event indicators where they were before the companions existed,
+    then the companions in the FMI 2.0 order."""
+    from fmpy import read_model_description
+    cls = physics_class(name)
+    md = read_model_description(str(fmi3_dir / f"{name}.fmu"))
+    refs = {v.name: v.valueReference for v in md.modelVariables}
+    table = [v.name for v in variable_table(cls)]
+    base = len(cls.parameters) + len(cls.effects) + 3 * len(cls.inputs) + len(cls.outputs) + 1
+    assert [refs[n] for n in table[:base]] == list(range(base))
+    states = [v for v in md.modelVariables if v.name.startswith("state.")]
+    assert refs["time"] == base and [v.valueReference for v in states] == \
+        list(range(base + 1, base + 1 + len(states)))
+    after = base + 1 + 2 * len(states) + cls.event_slots
+    assert [refs[n] for n in table[base:]] == list(range(after, after + len(table) - base))

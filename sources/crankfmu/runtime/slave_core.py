@@ -28,6 +28,7 @@ is set before they are read) and resolves everything by index.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -56,7 +57,24 @@ class FmiVariable:
 
 
 def variable_table(physics_class: type[PhysicsModel]) -> list[FmiVariable]:
-    """The FMU's variables in value-reference order."""
+    """The FMU's variables in value-reference order (FMI 2.0): the base table, then the
+    companions of a Taylor coupling (the FMI 3.0 adapter puts its own variables between the
+    two, so no value reference of an earlier build moved)."""
+    return list(_tables(physics_class))
+
+
+def base_table_size(physics_class: type[PhysicsModel]) -> int:
+    """The variables before the Taylor coupling's companions."""
+    return _tables(physics_class).base
+
+
+class _Tables(tuple):
+    """The table with the size of its base part."""
+    base: int
+
+
+@functools.lru_cache(maxsize=None)  # fixed per class; every instantiation asks for it
+def _tables(physics_class: type[PhysicsModel]) -> _Tables:
     table = [FmiVariable(v.name, "Real", "parameter", "fixed", "exact", v.unit, v.description,
                          float(v.start), v.min, v.max) for v in physics_class.parameters]
     table += [FmiVariable(f"effect_{e.name}", "Boolean", "parameter", "fixed", "exact", None,
@@ -75,6 +93,7 @@ def variable_table(physics_class: type[PhysicsModel]) -> list[FmiVariable]:
     table.append(FmiVariable(SCIPY_SOLVER, "Boolean", "parameter", "fixed", "exact", None,
                              "Integrate with scipy's solve_ivp instead of the built-in "
                              "Dormand-Prince 5(4) / closed forms (slower; a cross-check)", False))
+    base = len(table)
     table += [FmiVariable(f"{v.name}_d{k}", "Real", "input", "continuous", None,
                           derivative_unit(v.unit, k),
                           f"d{k}/dt{k} of {v.name} at the current time (crankfmu input "
@@ -92,7 +111,9 @@ def variable_table(physics_class: type[PhysicsModel]) -> list[FmiVariable]:
                               for i in inputs))
               for k in range(1, MAX_OUTPUT_DERIVATIVE + 1)
               for name in physics_class.derivative_outputs]
-    return table
+    tables = _Tables(table)
+    tables.base = base
+    return tables
 
 
 def derivative_unit(unit: str | None, order: int) -> str:
