@@ -37,6 +37,7 @@ from typing import Callable, Sequence
 
 DIFFERENCE_FRACTION = 1e-3  # node spacing of the differences, x the communication step
 Rows = list  # list[list[float]]
+INVERSE_FACTORIALS = tuple(1.0 / math.factorial(k) for k in range(12))
 
 
 class InputPolynomial:
@@ -62,12 +63,9 @@ class InputPolynomial:
             self._quadratic = (rows[0], [0.5 * v for v in rows[1]])
         elif self.moving:  # degree > 2: per moving input, rows[k]/k! highest degree first
             self._quadratic = None
-            self._high = []
-            for i in range(len(u)):
-                column = [row[i] for row in rows]
-                if any(column):
-                    factorial = [math.factorial(k) for k in range(1, len(rows) + 1)]
-                    self._high.append((i, [v / f for v, f in zip(column, factorial)][::-1]))
+            inverse = INVERSE_FACTORIALS[1:len(rows) + 1]
+            self._high = [(i, [row[i] * f for row, f in zip(rows, inverse)][::-1])
+                          for i in range(len(u)) if any(row[i] for row in rows)]
 
     def __call__(self, t: float) -> list:
         if not self.moving:
@@ -141,25 +139,6 @@ def polynomial_value(rows: Sequence[Sequence[float]], s: float) -> list[float]:
     return out
 
 
-def _coefficients(rows: Sequence[Sequence[float]]) -> list[list[float]]:
-    """rows[k] / k!, without the trailing rows that are all zero (at least one row)."""
-    top = len(rows)
-    while top > 1 and not any(rows[top - 1]):
-        top -= 1
-    out, factorial = [], 1.0
-    for k in range(top):
-        factorial *= max(k, 1)
-        out.append([v / factorial for v in rows[k]] if k > 1 else list(rows[k]))
-    return out
-
-
-def _horner(coefficients: list[list[float]], s: float) -> list[float]:
-    out = coefficients[-1]
-    for c in reversed(coefficients[:-1]):
-        out = [a + s * b for a, b in zip(c, out)]
-    return out
-
-
 def state_rows(f: Callable, t: float, x: Sequence[float], u_rows: Rows, order: int,
                delta: float, known: Rows = ()) -> Rows:
     """[x, x', ..., x^(order)] at t for x' = f(t, x, u), the inputs following the Taylor rows
@@ -173,17 +152,23 @@ def state_rows(f: Callable, t: float, x: Sequence[float], u_rows: Rows, order: i
     if len(rows) < 2:
         rows.append(list(f(t, rows[0], u(t))))
     for k in range(len(rows) - 1, order):  # rows[k + 1]: the k-th difference of f
-        weights = forward_weights(k, k + 1)
-        x_coefficients = _coefficients(rows[:k + 1])
+        weights = _WEIGHTS[k]
         total = [weights[0] * v for v in rows[1]]
         for j in range(1, k + 1):
             s = j * delta
-            phi = f(t + s, _horner(x_coefficients, s), u(t + s))
+            xs, c = rows[0], 1.0  # X(s) = sum_m rows[m] s^m / m!, m <= k
+            for m in range(1, k + 1):
+                c *= s / m
+                xs = [a + c * b for a, b in zip(xs, rows[m])]
             w = weights[j]
-            total = [a + w * v for a, v in zip(total, phi)]
+            total = [a + w * v for a, v in zip(total, f(t + s, xs, u(t + s)))]
         scale = delta ** -k
         rows.append([scale * v for v in total])
     return rows
+
+
+# the k-th difference on k + 1 nodes, for every order a state row can ask
+_WEIGHTS = [forward_weights(k, k + 1) for k in range(8)]
 
 
 class AffineOutputs:
