@@ -64,6 +64,12 @@ COSIMULATIONS = (
     ("adaptive taylor 4 tol 5e-4 max 0.05", dict(algorithm="adaptive", taylor=4,
                                                  tolerance=5e-4, max_step=0.05,
                                                  fmu_tolerance=1e-6)),
+    ("adaptive taylor 3 tol 5e-4 max 0.05 ft 1e-5", dict(algorithm="adaptive", taylor=3,
+                                                         tolerance=5e-4, max_step=0.05,
+                                                         fmu_tolerance=1e-5)),
+    ("adaptive taylor 4 tol 3e-4 max 0.05 ft 1e-5", dict(algorithm="adaptive", taylor=4,
+                                                         tolerance=3e-4, max_step=0.05,
+                                                         fmu_tolerance=1e-5)),
 )
 
 

@@ -112,8 +112,9 @@ class TaylorCoupling:
         derivatives up to the order of the round (all q in a last round). In Python floats: a
         few values per component, where numpy's per-call cost dominates."""
         system, q = self.system, self.order
-        for comp in system.order:  # the external inputs as they hold from t on
-            system.set_external(comp, t, initial=True)
+        for comp in system.order:  # the external inputs as they hold from t on (constants
+            if system.external_varies[comp]:  # were written at the start)
+                system.set_external(comp, t)
         for r in range(q - count + 1, q + 1):
             for comp in system.order:
                 write = self.writers[comp]
