@@ -15,7 +15,8 @@ k-th derivative at s = 0) and U the inputs' polynomial. So order k + 1 is a k-th
 f along the polynomials: forward (s >= 0, the side the next step integrates, so a kink just
 behind t is not seen) on the k + 1 nodes s = 0, delta, ..., k delta. No second copy of the
 equations: only derivatives() is called (k new calls for order k + 1, 1 + 1 + 2 + 3 = 7 for the
-4th derivative).
+4th derivative). The differences are taken of f(s) - f(0) (the weights sum to 0): a constant
+right-hand side or output gives rows of exact zeros, not round-off over delta^k.
 
 The node spacing delta is DIFFERENCE_FRACTION x the communication step h: the rows serve a
 polynomial over [t, t + h], whose term of degree k + 1 then carries a difference error of about
@@ -152,16 +153,17 @@ def state_rows(f: Callable, t: float, x: Sequence[float], u_rows: Rows, order: i
     if len(rows) < 2:
         rows.append(list(f(t, rows[0], u(t))))
     for k in range(len(rows) - 1, order):  # rows[k + 1]: the k-th difference of f
-        weights = _WEIGHTS[k]
-        total = [weights[0] * v for v in rows[1]]
+        weights, at_zero = _WEIGHTS[k], rows[1]
+        total = [0.0] * len(at_zero)
         for j in range(1, k + 1):
             s = j * delta
             xs, c = rows[0], 1.0  # X(s) = sum_m rows[m] s^m / m!, m <= k
             for m in range(1, k + 1):
                 c *= s / m
                 xs = [a + c * b for a, b in zip(xs, rows[m])]
-            w = weights[j]
-            total = [a + w * v for a, v in zip(total, f(t + s, xs, u(t + s)))]
+            w = weights[j]  # on f(s) - f(0): the weights sum to 0, so a constant gives 0
+            total = [a + w * (v - v0) for a, v, v0 in zip(total, f(t + s, xs, u(t + s)),
+                                                          at_zero)]
         scale = delta ** -k
         rows.append([scale * v for v in total])
     return rows
@@ -210,9 +212,10 @@ def output_rows(output_values: Callable, t: float, x_rows: Rows, u_rows: Rows, o
         s = j * delta
         y = output_values(t + s, polynomial_value(x_rows[:order + 1], s), u(t + s))
         values.append([y[i] for i in indices])
+    first = values[0]  # on y(s) - y(0), as for the states: a constant output gives 0
     out = []
     for k in range(1, order + 1):
         weights, scale = forward_weights(k, nodes), delta ** -k
-        out.append([scale * sum(w * v[i] for w, v in zip(weights, values))
+        out.append([scale * sum(w * (v[i] - first[i]) for w, v in zip(weights[1:], values[1:]))
                     for i in range(len(indices))])
     return out
