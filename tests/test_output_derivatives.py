@@ -248,3 +248,17 @@ def test_fmi3_keeps_its_model_exchange_references_and_puts_the_companions_after(
         list(range(base + 1, base + 1 + len(states)))
     after = base + 1 + 2 * len(states) + cls.event_slots
     assert [refs[n] for n in table[base:]] == list(range(after, after + len(table) - base))
+
+
+def test_a_constant_gives_exact_zero_rows():
+    """Differences are taken of f(s) - f(0): a constant right-hand side, and a constant output
+    differenced (the DC motor's flange_J without its lag), give rows of exact zeros, the same
+    in every host (the weights of a k-th difference sum to 0 only up to round-off, which
+    divided by delta^k made 1e7 out of nothing at delta = 1e-6)."""
+    rows = taylor.state_rows(lambda t, x, u: [0.3], 0.0, [1.0], [[0.0]], 4, 1e-6)
+    assert rows[2:] == [[0.0]] * 3
+    motor = DcServoMotor({}, [])  # no lag: the torque is the static law, differenced
+    assert not motor.derivative_outputs_affine
+    u = [[150.0, 3.0, 220.0, 150.0]] + [[0.0] * 4] * 4
+    y_rows = motor.derivative_output_rows(0.0, [[]] * 5, u, 4, 1e-6)
+    assert [row[1] for row in y_rows] == [0.0] * 4  # flange_J
