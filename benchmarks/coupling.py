@@ -47,29 +47,25 @@ SCENES = ("servo_press", "servo_press_speed_loop")
 STOP_TIME = 1.0
 SCIPY_METHODS = ("RK45", "DOP853", "LSODA")
 SCIPY_RTOLS = (1e-3, 3e-4, 1e-4, 3e-5, 1e-5, 3e-6, 1e-6)
+def adaptive_taylor(q: int, tolerance: float, fmu_tolerance: float, max_step: float = 0.05):
+    """(label, [master] settings) of an adaptive master with a Taylor coupling."""
+    label = f"adaptive taylor {q} tol {tolerance:g} max {max_step:g} ft {fmu_tolerance:g}"
+    return label, dict(algorithm="adaptive", taylor=q, tolerance=tolerance, max_step=max_step,
+                       fmu_tolerance=fmu_tolerance)
+
+
 # (label, [master] settings): the co-simulations tried
 COSIMULATIONS = (
     ("gauss-seidel ex2 h 1e-3", dict(algorithm="gauss-seidel", extrapolation=2, step=1e-3)),
     ("adaptive ex2 tol 3e-4", dict(algorithm="adaptive", extrapolation=2, tolerance=3e-4)),
     ("gauss-seidel taylor 3 h 4e-3", dict(algorithm="gauss-seidel", taylor=3, step=4e-3,
                                           fmu_tolerance=1e-6)),
-    ("adaptive taylor 3 tol 1e-3", dict(algorithm="adaptive", taylor=3, tolerance=1e-3,
-                                        fmu_tolerance=1e-6)),
-    ("adaptive taylor 3 tol 5e-4 max 0.05", dict(algorithm="adaptive", taylor=3,
-                                                 tolerance=5e-4, max_step=0.05,
-                                                 fmu_tolerance=1e-6)),
-    ("adaptive taylor 3 tol 2e-4 max 0.05", dict(algorithm="adaptive", taylor=3,
-                                                 tolerance=2e-4, max_step=0.05,
-                                                 fmu_tolerance=1e-6)),
-    ("adaptive taylor 4 tol 5e-4 max 0.05", dict(algorithm="adaptive", taylor=4,
-                                                 tolerance=5e-4, max_step=0.05,
-                                                 fmu_tolerance=1e-6)),
-    ("adaptive taylor 3 tol 5e-4 max 0.05 ft 1e-5", dict(algorithm="adaptive", taylor=3,
-                                                         tolerance=5e-4, max_step=0.05,
-                                                         fmu_tolerance=1e-5)),
-    ("adaptive taylor 4 tol 3e-4 max 0.05 ft 1e-5", dict(algorithm="adaptive", taylor=4,
-                                                         tolerance=3e-4, max_step=0.05,
-                                                         fmu_tolerance=1e-5)),
+    adaptive_taylor(3, 1e-3, 1e-6, max_step=1e-2),
+    adaptive_taylor(3, 5e-4, 1e-6),
+    adaptive_taylor(3, 2e-4, 1e-6),
+    adaptive_taylor(4, 5e-4, 1e-6),
+    adaptive_taylor(3, 5e-4, 1e-5),
+    adaptive_taylor(4, 3e-4, 1e-5),
 )
 
 
@@ -187,36 +183,27 @@ def floor(scene, settings: dict, repeats: int) -> tuple[float, float, float, flo
     from crankfmu.fmu import instance
     from crankfmu.masters.base import Master
 
-    inside = [0.0]
+    inside, setup_cpu = [0.0], [0.0]
 
-    def timed(function):
+    def timed(function, total=inside):
         def call(*args, **kwargs):
             start = CLOCK()
             try:
                 return function(*args, **kwargs)
             finally:
-                inside[0] += CLOCK() - start
+                total[0] += CLOCK() - start
         return call
     patches = [(instance.FmuInstance, name) for name in ("do_step", "get_state", "set_state",
                                                          "free_state")]
     originals = {p: getattr(*p) for p in patches}
     reader, writer = instance.FmuInstance.reader, instance.FmuInstance.writer
     setup, initialize = runner._setup, Master.initialize
-    setup_cpu = [0.0]
-
-    def whole(function):
-        def call(*args, **kwargs):
-            start = CLOCK()
-            try:
-                return function(*args, **kwargs)
-            finally:
-                setup_cpu[0] += CLOCK() - start
-        return call
     for (owner, name), function in originals.items():
         setattr(owner, name, timed(function))
     instance.FmuInstance.reader = lambda self, names: timed(reader(self, names))
     instance.FmuInstance.writer = lambda self, names: timed(writer(self, names))
-    runner._setup, Master.initialize = whole(setup), whole(initialize)
+    runner._setup = timed(setup, setup_cpu)
+    Master.initialize = timed(initialize, setup_cpu)
     trial = copy.deepcopy(scene)
     for key, value in settings.items():
         setattr(trial.master, key, value)

@@ -37,6 +37,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..runtime.taylor import moved_rows
+
 MAX_ORDER = 4  # the FMUs' output derivatives (runtime.model.MAX_OUTPUT_DERIVATIVE)
 
 
@@ -155,7 +157,7 @@ class TaylorCoupling:
         for comp in self.round_readers:
             new = rows[comp] if sequential else \
                 through_newest(start[comp], system.outputs[comp].tolist(), h)
-            self.guess[comp] = moved(new, h)[:q + 1]
+            self.guess[comp] = moved_rows(new, h)[:q + 1]
 
 
 class TaylorCoefficients(dict):
@@ -180,18 +182,6 @@ def through_newest(rows: list, values: list, h: float) -> list:
         factorial *= k
     scale = factorial / h ** (q + 1)
     return rows + [[(v - e) * scale for v, e in zip(values, end)]]
-
-
-def moved(rows: list, h: float) -> list:
-    """The Taylor rows of the same polynomial at s = h."""
-    out = []
-    for k in range(len(rows)):
-        row = rows[-1]
-        for j in range(len(rows) - 2, k - 1, -1):
-            c = h / (j - k + 1)
-            row = [a + c * b for a, b in zip(rows[j], row)]
-        out.append(row)
-    return out
 
 
 def _gather(sources: list, rows: dict, depth: int) -> list[float]:

@@ -97,16 +97,21 @@ class InputPolynomial:
         return [self(t)] + self.shifted(t - self.t0)
 
     def shifted(self, s: float) -> list[list]:
-        """[u', u'', ...] at t0 + s (row k: sum_j rows[k + j] s^j / j!, by Horner)."""
-        rows = self.derivatives
-        moved = []
-        for k in range(len(rows)):
-            out = rows[-1]
-            for j in range(len(rows) - 2, k - 1, -1):
-                c = s / (j - k + 1)
-                out = [a + c * b for a, b in zip(rows[j], out)]
-            moved.append(out)
-        return moved
+        """[u', u'', ...] at t0 + s."""
+        return moved_rows(self.derivatives, s)
+
+
+def moved_rows(rows: Rows, s: float) -> Rows:
+    """The Taylor rows of the same polynomial at s: row k is sum_j rows[k + j] s^j / j! (by
+    Horner; the rows of a quadratic moved as d1 + s d2, d2)."""
+    moved = []
+    for k in range(len(rows)):
+        out = rows[-1]
+        for j in range(len(rows) - 2, k - 1, -1):
+            c = s / (j - k + 1)
+            out = [a + c * b for a, b in zip(rows[j], out)]
+        moved.append(out)
+    return moved
 
 
 
