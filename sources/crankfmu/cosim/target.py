@@ -53,8 +53,9 @@ MAX_TOLERANCE_TRIES = 6  # variable-step master: tolerance updates
 MAX_STEP_RUNS = 8        # fixed-step master: rounds (candidate and companion) per candidate
 MAX_HALVINGS = 4         # the largest jump of the step at once: / 2^4
 MIN_START_STEPS = 16     # the coarse start takes at least this many steps
-TAYLOR_ORDER = 3         # the Taylor candidate's order: measured on the servo press, the
-                         # cheapest to 1e-4 and 1e-5 among 2, 3, 4 (docs/accuracy_tables.md)
+TAYLOR_ORDER = 3         # the Taylor candidate's order: the servo press's cheapest setting
+                         # for 1e-5 (docs/accuracy_tables.md: Gauss-Seidel, taylor 3, 2 ms);
+                         # over whole scenes 4 gains little (orders there about 3)
 
 
 class TargetNotMet(CrankfmuError):
