@@ -161,8 +161,8 @@ def test_press_output_derivatives_through_the_fmu(catalog):
         tau_rows = [500.0, 1e4, -2e5, 3e6, -4e7, 5e8]
         names = ["flange_tau"] + [f"flange_tau_d{k}" for k in range(1, 6)] + ["flange_J"]
         fmu.writer(names)(tau_rows + [0.05])
-        got = fmu.reader([f"flange_w_d{k}" for k in range(1, 5)])().tolist()
-        phi = fmu.reader([f"flange_phi_d{k}" for k in range(2, 5)])().tolist()
+        got = list(fmu.reader([f"flange_w_d{k}" for k in range(1, 5)])())
+        phi = list(fmu.reader([f"flange_phi_d{k}" for k in range(2, 5)])())
     finally:
         fmu.terminate()
     model = make_physics("StephensonPress", params, ["gravity", "forging_load"])

@@ -86,7 +86,7 @@ def test_exchange_rounds_give_the_monolithic_derivatives(tmp_path, rotor_fmus, m
         tau, phi2, w2 = r2.reader(["flange_tau", "phi", "w"])()
         theta = (-tau - p["ds"] * (w1 - w2)) / p["k"]
         x = np.array([phi1, w1, theta, phi2, w2])
-        exact = self.exchange(t, {c: [v.tolist()] for c, v in system.outputs.items()}, q)
+        exact = self.exchange(t, {c: [list(v)] for c, v in system.outputs.items()}, q)
         for k in range(q + 1):
             xk = np.linalg.matrix_power(A, k) @ x
             want = {"r1": xk[1], "r2": -(p["k"] * xk[2] + p["ds"] * (xk[1] - xk[4]))}
