@@ -91,8 +91,9 @@ def scene_setup(name: str, out: Path):
     scene = load_scene(ROOT / "scenarios" / f"{name}.toml")
     scene.stop_time = STOP_TIME
     metric = make_metric("max", scene.record)
-    ref, _, _ = load_or_solve_reference(scene, record_times(scene), out / name / "reference",
-                                        1e-10)
+    folder = out / name / "reference"
+    folder.mkdir(parents=True, exist_ok=True)  # write_run_set writes into an existing folder
+    ref, _, _ = load_or_solve_reference(scene, record_times(scene), folder, 1e-10)
     return scene, metric, ref
 
 
