@@ -57,8 +57,9 @@ def example_masters():
         def gather(self, comp, coefficients):
             rows = super().gather(comp, coefficients)
             if self.offset and self.power.ports and comp == self.power.ports[0].receiver:
-                rows = rows.copy()
-                rows[0, self.power.ports[0].tau_in] += self.offset
+                value = list(rows[0])  # the rows are the sources' own: a new value row
+                value[self.power.ports[0].tau_in] += self.offset
+                rows = [value, *rows[1:]]
             return rows
 
         def step(self, t, h):

@@ -35,8 +35,6 @@ an extrapolation of order p becomes an interpolation through the newest point.
 """
 from __future__ import annotations
 
-import numpy as np
-
 from ..runtime.taylor import moved_rows
 
 MAX_ORDER = 4  # the FMUs' output derivatives (runtime.model.MAX_OUTPUT_DERIVATIVE)
@@ -90,7 +88,7 @@ class TaylorCoupling:
         if self._at[0] != t:
             externals = self._external_values(t)
             if externals != self.externals:
-                rows = self.exchange(t, {c: [v.tolist()] for c, v in self.system.outputs.items()},
+                rows = self.exchange(t, {c: [v] for c, v in self.system.outputs.items()},
                                      self.order)
             else:
                 rows = self.exchange(t, dict(self.guess), 1)
@@ -100,8 +98,8 @@ class TaylorCoupling:
         return self._at[1]
 
     def coefficients(self, t: float) -> "TaylorCoefficients":
-        """rows_at(t) as the masters' `Coefficients` (numpy rows per component)."""
-        return TaylorCoefficients(t, {c: np.array(v) for c, v in self.rows_at(t).items()})
+        """rows_at(t) as the masters' `Coefficients`."""
+        return TaylorCoefficients(t, self.rows_at(t))
 
     def _external_values(self, t: float) -> list:
         """The external inputs' values as the masters write them at t (a change, e.g. a step
@@ -124,7 +122,7 @@ class TaylorCoupling:
                     write(_gather(system.in_sources[comp], rows, q + 1))
                 readers = self.round_readers.get(comp)
                 if readers is not None:
-                    flat, n = readers[r - 1]().tolist(), len(system.out_names[comp])
+                    flat, n = readers[r - 1](), len(system.out_names[comp])
                     rows[comp] = [flat[k * n:(k + 1) * n] for k in range(r + 1)]
         self.rounds += count
         return rows
@@ -149,22 +147,22 @@ class TaylorCoupling:
                 master.seen[comp] = ([[]], h)
             system.fmus[comp].do_step(t, h)
             if sequential and comp in self.round_readers:
-                rows[comp] = through_newest(rows[comp], system.refresh_outputs(comp).tolist(), h)
+                rows[comp] = through_newest(rows[comp], system.refresh_outputs(comp), h)
         if not sequential:
             for comp in system.order:
                 system.refresh_outputs(comp)
         start = self.rows_at(t)  # the guess at t + h: the polynomial through the new value
         for comp in self.round_readers:
             new = rows[comp] if sequential else \
-                through_newest(start[comp], system.outputs[comp].tolist(), h)
+                through_newest(start[comp], system.outputs[comp], h)
             self.guess[comp] = moved_rows(new, h)[:q + 1]
 
 
 class TaylorCoefficients(dict):
     """comp -> Taylor rows at t of its connected outputs (the masters' `Coefficients`
-    interface, numpy rows)."""
+    interface)."""
 
-    def __init__(self, t: float, rows: dict[str, np.ndarray]):
+    def __init__(self, t: float, rows: dict[str, list]):
         super().__init__(rows)
         self.t = t
 
