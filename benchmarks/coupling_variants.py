@@ -53,14 +53,23 @@ def example_masters():
         def __init__(self, system, settings):
             super().__init__(system, settings)
             self.offset = 0.0  # N.m on the receiver's torque input over the next step
+            # the sweeps call the per-FMU gather functions of `_sweep_plan` (masters/base.py):
+            # the receiver's is wrapped there
+            receiver = self.power.ports[0].receiver if self.power.ports else None
+            self._sweep_plan = [(c, self._corrected(g) if c == receiver else g, a, r)
+                                for c, g, a, r in self._sweep_plan]
 
-        def gather(self, comp, coefficients):
-            rows = super().gather(comp, coefficients)
-            if self.offset and self.power.ports and comp == self.power.ports[0].receiver:
+        def _corrected(self, gather):
+            tau_in = self.power.ports[0].tau_in
+
+            def corrected(coefficients):
+                rows = gather(coefficients)
+                if not self.offset:
+                    return rows
                 value = list(rows[0])  # the rows are the sources' own: a new value row
-                value[self.power.ports[0].tau_in] += self.offset
-                rows = [value, *rows[1:]]
-            return rows
+                value[tau_in] += self.offset
+                return [value, *rows[1:]]
+            return corrected
 
         def step(self, t, h):
             port = self.power.ports[0]
