@@ -20,7 +20,7 @@ the figures of issue 25, in one run.
 (b) The floor of that cheapest co-simulation: the CPU inside its FMI calls (doStep, the
     exchange's and the sweeps' setReal/getReal, state save/restore, recording reads) plus its
     setup (instantiation, initialization): what the run would cost with a master that cost
-    nothing, against the same scipy solve.
+    nothing, against the same scipy solve, run after each instrumented run.
 (c) The observed order of the Taylor coupling (and of extrapolation, for comparison) per master
     on the two-mass oscillator (tests/test_taylor_coupling.py), against its closed form: error
     at h = 1e-2, 5e-3, 2.5e-3 s and the slopes.
@@ -174,11 +174,13 @@ def report(name: str, cosims: list[Candidate], scipys: list[Candidate], target: 
 
 
 # -- (b) the floor ------------------------------------------------------------------------------
-def floor(scene, settings: dict, repeats: int) -> tuple[float, float, float, float]:
-    """(run CPU, CPU inside the FMI calls, setup CPU, floor = the two) of the co-simulation
-    `settings`, medians over `repeats`: every FmuInstance call that reaches an FMU (readers,
-    writers, doStep, FMU state) timed, and the runner's setup and the master's initialization
-    counted whole (their Python is a few lines around FMI calls)."""
+def floor(scene, settings: dict, repeats: int, beside
+          ) -> tuple[float, float, float, float, float]:
+    """(run CPU, CPU inside the FMI calls, setup CPU, floor = the two, CPU of `beside`) of the
+    co-simulation `settings`, medians over `repeats`: every FmuInstance call that reaches an FMU
+    (readers, writers, doStep, FMU state) timed, and the runner's setup and the master's
+    initialization counted whole (their Python is a few lines around FMI calls). `beside` (a
+    Candidate's run: the scipy solve) runs after each, so the ratio is of one moment's load."""
     from crankfmu.cosim import runner
     from crankfmu.cosim.runner import RunOptions, run_scene
     from crankfmu.fmu import instance
@@ -216,22 +218,22 @@ def floor(scene, settings: dict, repeats: int) -> tuple[float, float, float, flo
                 warnings.simplefilter("ignore")
                 result = run_scene(copy.deepcopy(trial), RunOptions(
                     out=None, fmu_dir=ROOT / "fmus", progress=False))
-            runs.append((result.cpu_seconds, inside[0], setup_cpu[0]))
+            runs.append((result.cpu_seconds, inside[0], setup_cpu[0], beside()[0]))
     finally:
         for (owner, name), function in originals.items():
             setattr(owner, name, function)
         instance.FmuInstance.reader, instance.FmuInstance.writer = reader, writer
         runner._setup, Master.initialize = setup, initialize
-    cpu, calls, setup_time = (statistics.median(r[k] for r in runs) for k in range(3))
-    return cpu, calls, setup_time, calls + setup_time
+    cpu, calls, setup_time, other = (statistics.median(r[k] for r in runs) for k in range(4))
+    return cpu, calls, setup_time, calls + setup_time, other
 
 
 def print_floor(best, mono, settings: dict, scene, repeats: int) -> None:
-    cpu, calls, setup, bound = floor(scene, settings, repeats)
+    cpu, calls, setup, bound, mono_cpu = floor(scene, settings, repeats, mono.run)
     print(f"  floor of {best.label}: {calls * 1e3:.1f} ms inside the FMI calls + {setup * 1e3:.1f}"
-          f" ms setup = {bound * 1e3:.1f} ms (the run: {cpu * 1e3:.1f} ms, so the master's own "
-          f"Python {(cpu - bound) * 1e3:.1f} ms); floor / {mono.label}: "
-          f"{bound / mono.cpu:.2f}")
+          f" ms setup = {bound * 1e3:.1f} ms (the run, its calls timed: {cpu * 1e3:.1f} ms, so "
+          f"the master's own Python {(cpu - bound) * 1e3:.1f} ms); {mono.label} beside it: "
+          f"{mono_cpu * 1e3:.1f} ms; floor / that: {bound / mono_cpu:.2f}")
 
 
 # -- (c) orders on the two-mass oscillator -----------------------------------------------------
