@@ -16,13 +16,13 @@ from lxml import etree
 from ..errors import CrankfmuError, InterruptedRun
 from ..system.scene import Scene, SceneError, check_run_size
 from ..fmu.instance import FmuInstance, LogCollector
-from ..masters import MASTERS, DivergenceError, OptionError, make_master
+from ..masters import DivergenceError, OptionError, make_master, traits
 from ..masters.inputs import split_at_edges, step_edges
 from .results import (Recorder, check_record_size, check_run_set, column_units, failed_csv,
                       figure_png, normalize_unit, run_figure, versions, write_run_set)
 from .trust import judge_result
 from ..system.wiring import (System, check_components, check_links, check_loops, check_physics,
-                             default_fmu_dir, master_interface, resolve_fmu)
+                             default_fmu_dir, resolve_fmu)
 
 
 class RunError(CrankfmuError, RuntimeError):
@@ -87,7 +87,7 @@ def load_fmus(scene: Scene, fmu_dir: Path, log: LogCollector) -> dict[str, FmuIn
     """Every component's FMU, loaded (FMI 2.0 or 3.0, as the file is) for the interface the
     scene's master steps it through (`interface` of its class: CoSimulation by default)."""
     from ..fmu.instance3 import MODEL_EXCHANGE, open_fmu
-    interface = master_interface(scene.master.algorithm)
+    interface = traits(scene.master.algorithm).interface
     fmus: dict[str, FmuInstance] = {}
     for name in scene.components:
         path = resolve_fmu(scene, name, fmu_dir, model_exchange=interface == MODEL_EXCHANGE)
@@ -364,10 +364,9 @@ def submit_companions(scene, fmu_dir, companions) -> list:
     tenth of a variable-step master's tolerance): [(knob value, Pending)]."""
     from .estimate import companion_knobs, companion_scene
     m = scene.master
-    if not _co_simulation(m.algorithm):
+    if traits(m.algorithm).monolithic:
         return []
-    variable = bool(getattr(MASTERS.get(m.algorithm), "variable_step", False))
-    knob, _, values = companion_knobs(variable, m.step, m.tolerance)
+    knob, _, values = companion_knobs(m.algorithm, m.step, m.tolerance)
     return [(v, companions.submit(run_companion, companion_scene(scene, knob, v), fmu_dir))
             for v in values]
 
@@ -380,12 +379,11 @@ def estimate_run(scene, run_series: tuple, fmu_dir=None, pending: list | None = 
     from .estimate import Estimate, companion_knobs, order_rule, richardson, scene_metric
     from .metrics import MetricError
     m = scene.master
-    if not _co_simulation(m.algorithm):
+    if traits(m.algorithm).monolithic:
         return Estimate(reason=f"{m.algorithm} has no coupling error to estimate: the FMUs are "
                                f"integrated as one ODE, to its solver's tolerance (compare "
                                f"with `crankfmu reference`)")
-    variable = bool(getattr(MASTERS.get(m.algorithm), "variable_step", False))
-    knob, ratio, _ = companion_knobs(variable, m.step, m.tolerance)
+    knob, ratio, _ = companion_knobs(m.algorithm, m.step, m.tolerance)
     try:
         metric = scene_metric(scene)
     except MetricError as err:
@@ -401,20 +399,13 @@ def estimate_run(scene, run_series: tuple, fmu_dir=None, pending: list | None = 
                             reason=f"the companion run at {knob} {value:g} stopped: "
                                    f"{run.reason}")
         series.append(run.series)
-    est = richardson(metric, series, ratio, knob, *order_rule(variable, m.extrapolation))
+    est = richardson(metric, series, ratio, knob, *order_rule(m.algorithm, m.extrapolation))
     est.companion_seconds = seconds
     if est.ok and est.error < FLOOR_FACTOR * m.fmu_tolerance:  # say it: no number hides it
         est.reason = "; ".join(filter(None, [est.reason, (
             f"below {FLOOR_FACTOR:g} x fmu_tolerance: the FMUs' own solver error, which a "
             f"companion with the same fmu_tolerance does not see, may be larger")]))
     return est
-
-
-def _co_simulation(algorithm: str) -> bool:
-    """Does the master co-simulate (step the FMUs), as opposed to integrating their Model
-    Exchange interfaces as one ODE?"""
-    from ..fmu.instance3 import CO_SIMULATION
-    return master_interface(algorithm) == CO_SIMULATION
 
 
 def plot_roles(scene: Scene) -> dict | None:

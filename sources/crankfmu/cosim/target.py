@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 
 from ..errors import CrankfmuError
 
-from .estimate import (STEP_RATIO, Estimate, difference, nominal_order, richardson,
+from .estimate import (STEP_RATIO, Estimate, difference, order_rule, richardson,
                        scene_metric, with_metric_record)
 
 START_FACTOR = 32.0      # the first step, x the scene's step (the sweep's coarsest): measured
@@ -98,7 +98,7 @@ def search(scene, target: float, fmu_dir=None, jobs: int = 1, echo=None):
     with the report's reasons when no candidate meets the target. `jobs` > 1: the companions
     of each run execute in worker processes beside it (cosim/companions.py). `echo`: called
     with a line after each run and each estimate (progress)."""
-    from ..masters import MASTERS
+    from ..masters import traits
     from .companions import Companions
     if not (target > 0 and math.isfinite(target)):
         raise ValueError(f"--target must be a positive number, got {target!r}")
@@ -109,8 +109,7 @@ def search(scene, target: float, fmu_dir=None, jobs: int = 1, echo=None):
     try:
         fmu_dir = _built_fmus(scene, fmu_dir)
         for algorithm, extrapolation in candidates(scene):
-            variable = bool(getattr(MASTERS.get(algorithm), "variable_step", False))
-            walk = _tolerance_walk if variable else _step_ladder
+            walk = _tolerance_walk if traits(algorithm).variable_step else _step_ladder
             found = walk(scene, algorithm, extrapolation, target, fmu_dir, report, pool)
             if found is not None:
                 result, est, trial = found
@@ -164,7 +163,7 @@ def _step_ladder(scene, algorithm, extrapolation, target, fmu_dir, report, pool)
     h0 / 2^k; `rungs` maps k to the run's (series, result)."""
     metric = scene_metric(scene)
     label = f"{algorithm}, extrapolation {extrapolation}"
-    nominal = nominal_order(extrapolation)
+    nominal, _ = order_rule(algorithm, extrapolation)
     h_min = scene.master.step * MIN_STEP_FACTOR
     # at least MIN_START_STEPS steps over the run: a step longer than the run is no step
     # (a power of 2 x the scene's step, so the steps tried are those of the accuracy sweep)

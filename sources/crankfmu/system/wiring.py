@@ -16,7 +16,7 @@ from pathlib import Path
 from .scene import Scene, SceneError
 from ..fmu.archive import fmu_file_problem
 from ..fmu.instance import FmuInstance
-from ..fmu.instance3 import CO_SIMULATION, feedthrough, value_type
+from ..fmu.instance3 import feedthrough, value_type
 
 log = logging.getLogger(__name__)
 
@@ -64,13 +64,6 @@ def resolve_fmu(scene: Scene, comp_name: str, fmu_dir: Path,
         warn_if_tree_differs(scene.path.resolve().parent.parent)
         build()
     return path
-
-
-def master_interface(algorithm: str) -> str:
-    """The FMI interface the master steps the FMUs through: "CoSimulation", or "ModelExchange"
-    (the model-exchange master: every FMU's Model Exchange interface, as one ODE)."""
-    from ..masters import MASTERS
-    return getattr(MASTERS.get(algorithm), "interface", CO_SIMULATION)
 
 
 def _check_fmi_version(scene: Scene, comp_name: str, path: Path) -> None:
