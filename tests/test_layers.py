@@ -158,3 +158,15 @@ def test_user_errors_derive_from_the_one_base(name):
              "EventSpecError": EventSpecError, "MechanismError": MechanismError,
              "SweepError": SweepError}
     assert issubclass(found[name], errors.CrankfmuError)
+
+
+def test_cli_and_the_commands_do_not_import_each_other():
+    """cli.py builds the parser and dispatches, naming each command's module (importlib); the
+    commands take their shared options from commands/options.py. Before: 18 imports between
+    cli.py and commands/, both ways, and run and build lived in cli.py."""
+    both_ways = [f"{m} -> {d}" for m, deps in GRAPH.items() for d in deps
+                 if (m == "cli" and top(d) == "commands") or (top(m) == "commands" and d == "cli")]
+    assert both_ways == []
+    from crankfmu.cli import COMMANDS
+    modules = {m.split(".")[1] for m in MODULES if m.startswith("commands.")}
+    assert set(COMMANDS.values()) == modules - {"options"}
