@@ -122,8 +122,8 @@ def claim_verdict(sweep: dict, m_low: float | None = None, m_high: float | None 
                  f"{cw['mass'][0]:g} kg)")
     r2 = sweep["r"] ** 2
     lines.append(f"link 2 translates with the crank pin: a kilogram of it is a flywheel of "
-                 f"r^2 = {r2:.4g} kg m^2 at the crank; the (28) flywheel, {sweep['J_Mx']:.2f} "
-                 f"kg m^2 at the crank, would take {sweep['J_Mx'] / r2:.0f} kg of base link")
+                 f"r^2 = {r2:.4g} kg.m2 at the crank; the (28) flywheel, {sweep['J_Mx']:.2f} "
+                 f"kg.m2 at the crank, would take {sweep['J_Mx'] / r2:.0f} kg of base link")
     holds = change["gravity on"] < 0   # a press has weights: the claim is about this case
     lines.append("the claim that the base link is a built-in counterweight reducing the "
                  "non-uniformity: " + ("holds" if holds else "FAILS") +
