@@ -286,3 +286,29 @@ def test_docs_cli_page_lists_every_option():
     page = cli_doc.PAGE.read_text()
     assert cli_doc.page_with(cli_doc.generated(), page) == page, \
         "docs/cli.md is stale: python scripts/cli_doc.py"
+
+
+def test_a_run_warns_when_the_tree_beside_the_scene_differs(tmp_path, fmu_dir, capsys):
+    """After a plain `pip install .` an edited model in the source tree was used by nobody and
+    `crankfmu run` said nothing (its FMUs were current for the installed copy, so nothing was
+    rebuilt); only `crankfmu build` warned. Now the run warns too, once."""
+    import shutil
+
+    from crankfmu.cli import main
+    from crankfmu.fmu.build import PACKAGE_DIR
+    from crankfmu.system import wiring
+    tree = tmp_path / "tree"
+    shutil.copytree(PACKAGE_DIR, tree / "sources" / "crankfmu",
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    (tree / "scenarios").mkdir()
+    shutil.copy(SCENARIOS / "servo_press.toml", tree / "scenarios")
+    motor = tree / "sources" / "crankfmu" / "models" / "dc_motor" / "dc_motor.py"
+    motor.write_text(motor.read_text() + "# an edit\n")
+    wiring._TREES_CHECKED.discard(tree)
+    command = ["run", str(tree / "scenarios" / "servo_press.toml"), "--stop-time", "0.01",
+               "--fmus", str(fmu_dir), "--out", str(tmp_path / "out"), "--no-estimate"]
+    assert main(command) == 0
+    err = capsys.readouterr().err
+    assert "building" not in err  # the FMUs were current: the warning is not the build's
+    assert err.count("warning: the FMUs are built from the installed crankfmu at ") == 1
+    assert "models/dc_motor/dc_motor.py" in err

@@ -25,9 +25,7 @@ loads them (the parent builds them: two processes would otherwise build into one
 from __future__ import annotations
 
 import contextlib
-import multiprocessing
 import os
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
 from ..errors import CrankfmuError
@@ -111,7 +109,9 @@ class Companions:
     def __init__(self, jobs: int = 1):
         self.jobs = processes(int(jobs))
         self._pool = None
-        if self.jobs > 1:
+        if self.jobs > 1:  # multiprocessing imported here: a run without workers skips it
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor
             self._pool = ProcessPoolExecutor(max_workers=self.jobs - 1,
                                              mp_context=multiprocessing.get_context("spawn"))
             with guarded_start():  # start the workers now, while the parent loads the FMUs

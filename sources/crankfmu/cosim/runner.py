@@ -79,8 +79,9 @@ class RunOptions:
     estimate: bool = False
     # processes for the run and its companions (cosim/companions.py): 1 runs the companions
     # here after the run; 2 runs them in a worker beside it (pays on long runs with a free core:
-    # benchmarks/estimate_cost.py)
+    # benchmarks/estimate_cost.py, benchmarks/jobs.py)
     jobs: int = 1
+    label: str | None = None  # the progress bar's (default: the scene's name)
 
 
 def load_fmus(scene: Scene, fmu_dir: Path, log: LogCollector) -> dict[str, FmuInstance]:
@@ -234,7 +235,8 @@ def _prepare_and_run(scene, options, out, log, fmu_dir, companions) -> RunResult
         close_fmus(fmus)
         raise
     # the FMUs are built now: the companions can load them beside this run
-    pending = submit_companions(scene, fmu_dir, companions) if companions is not None else None
+    pending = submit_companions(scene, fmu_dir, companions, options.progress) \
+        if companions is not None else None
     try:
         with _Interrupt() as interrupt:
             result = _run(scene, options, out, log, fmus, system, master, recorder, readers,
@@ -277,7 +279,7 @@ def _run(scene, options, out, log, fmus, system, master, recorder, readers, inte
         master.initialize(t0)
         _sample(recorder, readers, t0)
         loop = _variable_steps if master.variable_step else _fixed_steps
-        for step, t, t_new, record in loop(master, scene, options.progress):
+        for step, t, t_new, record in loop(master, scene, options.progress, options.label):
             if interrupt.requested:
                 break
             master.check_finite(t_new)
@@ -343,14 +345,15 @@ def _write_result(scene: Scene, options: RunOptions, out: Path | None, result: R
 FLOOR_FACTOR = 10.0  # an estimate below this x fmu_tolerance is flagged (the studies' floor)
 
 
-def run_companion(scene, fmu_dir):
+def run_companion(scene, fmu_dir, progress: bool | None = False, label: str | None = None):
     """One companion run, no files written: a CompanionRun (module level: a worker of
-    cosim.companions calls it)."""
+    cosim.companions calls it). `progress`, `label`: its bar (RunOptions)."""
     from .companions import CompanionRun
     from .estimate import recorder_series
     t0 = time.perf_counter()
     try:
-        result = run_scene(scene, RunOptions(out=None, fmu_dir=fmu_dir, progress=False))
+        result = run_scene(scene, RunOptions(out=None, fmu_dir=fmu_dir, progress=progress,
+                                             label=label))
     except InterruptedRun:  # Ctrl-C: the user's, not a companion that stopped on its own
         raise
     except CrankfmuError as err:  # RunError (it stopped) or a refused setting (too many steps)
@@ -359,15 +362,18 @@ def run_companion(scene, fmu_dir):
                         result=result)
 
 
-def submit_companions(scene, fmu_dir, companions) -> list:
+def submit_companions(scene, fmu_dir, companions, progress: bool | None = False) -> list:
     """Start the companion runs of `scene`'s estimate (its master at half the step, or at a
-    tenth of a variable-step master's tolerance): [(knob value, Pending)]."""
+    tenth of a variable-step master's tolerance): [(knob value, Pending)]. `progress`: a bar
+    for each companion that runs here (companions.jobs 1), after the run's own."""
     from .estimate import companion_knobs, companion_scene
     m = scene.master
     if traits(m.algorithm).monolithic:
         return []
     knob, _, values = companion_knobs(m.algorithm, m.step, m.tolerance)
-    return [(v, companions.submit(run_companion, companion_scene(scene, knob, v), fmu_dir))
+    here = progress if companions.jobs == 1 else False
+    return [(v, companions.submit(run_companion, companion_scene(scene, knob, v), fmu_dir, here,
+                                  f"{scene.name}: error estimate, companion at {knob} {v:g}"))
             for v in values]
 
 
@@ -432,7 +438,7 @@ def _reference_beside(out: Path, recorder: Recorder):
     return (names, rows) if set(recorder.names) <= set(names) and len(rows) > 1 else None
 
 
-def _fixed_steps(master, scene: Scene, progress):
+def _fixed_steps(master, scene: Scene, progress, label: str | None = None):
     """Steps of [master].step on the grid t0 + k h (the last one shortened to end at
     stop_time); yields (step, t, t_new, record?) with rows every [record].interval. A grid step
     across an edge of a step-table input is taken in pieces that end at the edge
@@ -444,7 +450,7 @@ def _fixed_steps(master, scene: Scene, progress):
     every = max(1, round((scene.record_interval or h) / h))
     edges = step_edges(master.system)
     advance = master.step
-    for step in _progress(range(1, n_steps + 1), progress, scene.name):
+    for step in _progress(range(1, n_steps + 1), progress, label or scene.name):
         t = t0 + (step - 1) * h
         if edges:
             start = t
@@ -456,7 +462,7 @@ def _fixed_steps(master, scene: Scene, progress):
         yield step, t, min(t0 + step * h, stop), step % every == 0 or step == n_steps
 
 
-def _variable_steps(master, scene: Scene, progress):
+def _variable_steps(master, scene: Scene, progress, label: str | None = None):
     """Steps the master chooses (`next_step`); a row at every accepted point at least
     [record].interval after the last row (every accepted point without an interval), and at
     stop_time. A step that would leave less than min_step before stop_time is stretched to it."""
@@ -464,7 +470,7 @@ def _variable_steps(master, scene: Scene, progress):
     min_step = scene.master.min_step  # a variable-step master's declared option
     interval = scene.record_interval or 0.0
     last_row, step = t, 0
-    bar = _progress(None, progress, scene.name, total=stop - t)
+    bar = _progress(None, progress, label or scene.name, total=stop - t)
     while t < stop:
         h = master.next_step
         if t + h > stop - min_step:

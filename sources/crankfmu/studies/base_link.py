@@ -70,7 +70,7 @@ def _first_approximation(press, motor, u0: float, lag: bool, crank_mass):
 def mass_sweep(scene, masses=DEFAULT_MASSES, cases=CASES) -> dict:
     """{case: {"mass", "delta_sim", "delta_1", "L1", "J0"}} (arrays over `masses` [kg]; delta
     [1], L1 [N m], J0 [kg m^2]) plus "lag" and "m2_scene" [kg]. Progress on stderr."""
-    from .papers import press_steady_revolution, progress
+    from .papers import press_steady_revolution, progress, progress_over
 
     from .flywheel import eq28_conventions
 
@@ -81,7 +81,7 @@ def mass_sweep(scene, masses=DEFAULT_MASSES, cases=CASES) -> dict:
     for case in cases:
         progress(f"analyze press: {case}, {masses.size} masses")
         rows = []
-        for m in masses:
+        for m in progress_over(masses, f"analyze press: {case}", "mass"):
             p, cm = _case_models(press, case, float(m))
             err = _first_approximation(p, motor, u0, lag, cm)
             rev = press_steady_revolution(p, motor, u0, crank_mass=cm)

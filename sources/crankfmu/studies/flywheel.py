@@ -106,8 +106,10 @@ def analytic(scene, J_f: np.ndarray, motor: str = "motor", press: str = "press")
                             u0)
     i2 = model.p.gear_ratio ** 2
     W, J_D, J_M0, s = conv["omega0"], conv["J_D"], conv["mean"]["J_M0"], conv["s"]
+    from .papers import progress_over
     return {
-        "delta_1": np.array([pa.dynamic_error(drive(j), lag=lag).delta for j in J_f]),
+        "delta_1": np.array([pa.dynamic_error(drive(j), lag=lag).delta for j in
+                             progress_over(J_f, "analyze flywheel", "flywheel")]),
         "ratio_26": np.array([math.sqrt(pa.flywheel_ratio(j * i2, W, J_D, J_M0, s))
                               for j in J_f]),
         "J_Mx": conv["mean"]["J_Mx_motor"], "J_Mx_crank": conv["mean"]["J_Mx"],

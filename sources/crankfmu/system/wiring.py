@@ -57,11 +57,11 @@ def resolve_fmu(scene: Scene, comp_name: str, fmu_dir: Path,
         path = fmu_dir / f"{ref}.fmu"
         rebuild = rebuild_reason(path, ref)
         build = functools.partial(build_fmu, ref, fmu_dir)
+    warn_once_if_tree_differs(scene.path.resolve().parent.parent)
     if rebuild is not None:
         from ..fmu.build import PACKAGE_DIR
         (log.warning if rebuild.damaged else log.info)(
             "building %s (%s) from %s", path, rebuild.reason, PACKAGE_DIR)
-        warn_if_tree_differs(scene.path.resolve().parent.parent)
         build()
     return path
 
@@ -103,6 +103,20 @@ def warn_if_tree_differs(tree: Path) -> None:
                     "editable (pip install -e %s)", PACKAGE_DIR, tree / "sources" / "crankfmu",
                     ", ".join(differ[:3]), f" and {len(differ) - 3} more" if len(differ) > 3
                     else "", tree)
+
+
+_TREES_CHECKED: set[Path] = set()
+
+
+def warn_once_if_tree_differs(tree: Path) -> None:
+    """warn_if_tree_differs, once per source tree and process: every command that uses a
+    catalog FMU says that an edit in the tree beside the scene is not used, built or not (after
+    a plain `pip install .` the FMUs in fmus/ are current for the installed copy, so nothing
+    was rebuilt and nothing said so). In a tree the package was imported from (an editable
+    install, PYTHONPATH) it costs two stats."""
+    if tree not in _TREES_CHECKED:
+        _TREES_CHECKED.add(tree)
+        warn_if_tree_differs(tree)
 
 
 @dataclass
