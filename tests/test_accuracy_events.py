@@ -78,7 +78,7 @@ def test_shipped_scenes_name_their_metric():
         scene = load_scene(SCENARIOS / f"{name}.toml")
         assert scene_metric_name(scene) == metric, name
         for spec in scene_event_specs(scene):  # every named figure exists in the model
-            from crankfmu.reference.composed import ComposedModel
+            from crankfmu.monolithic.composed import ComposedModel
             model = ComposedModel(scene)
             for ref in spec.needs:
                 comp, var = ref.split(".", 1)

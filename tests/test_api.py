@@ -239,3 +239,24 @@ def test_a_pool_from_a_script_without_a_main_guard_says_what_to_do(tmp_path, fmu
     last = done.stderr.strip().splitlines()[-1]
     assert last.startswith("crankfmu.cosim.companions.WorkerStartError: ") and \
         'if __name__ == "__main__":' in last, done.stderr[-2000:]
+
+
+def test_the_api_functions_stay_whatever_is_imported():
+    """crankfmu.reference, accuracy, compare and sweep stay the API's functions when every
+    subpackage and module is imported, and the package is a plain module: no subpackage shares
+    their names (before: crankfmu/reference/ did, and the package swapped its module class so
+    that importing it would not replace the function)."""
+    import importlib
+    import pkgutil
+    import types
+
+    import crankfmu
+    for module in pkgutil.iter_modules(crankfmu.__path__, "crankfmu."):
+        if module.name != "crankfmu.__main__":
+            importlib.import_module(module.name)
+    for name in ("crankfmu.studies.accuracy", "crankfmu.studies.compare",
+                 "crankfmu.studies.sweep", "crankfmu.monolithic.solve"):
+        importlib.import_module(name)
+    assert type(crankfmu) is types.ModuleType
+    for name in ("reference", "accuracy", "compare", "sweep"):
+        assert isinstance(getattr(crankfmu, name), types.FunctionType), name

@@ -274,7 +274,7 @@ def reference(scene, *, stop_time=None, parameters=None, inputs=None, rtol=None,
     the run's grid. `out`: the output folder (<scene name>_reference.csv and its sidecar);
     nothing is written without it."""
     from .cosim.results import check_run_set
-    from .reference import DEFAULT_RTOL, solve_reference, write_reference
+    from .monolithic import DEFAULT_RTOL, solve_reference, write_reference
     scene = prepare(scene, stop_time=stop_time, parameters=parameters, inputs=inputs)
     folder = _path(out, "out", "the output folder")
     csv = check_run_set(folder / f"{scene.name}_reference.csv", "out") if folder else None

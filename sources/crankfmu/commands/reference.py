@@ -8,7 +8,7 @@ from .options import add_output_options, add_scene_options, add_step_option, loa
 
 
 def register(sub) -> None:
-    from ..reference import DEFAULT_RTOL
+    from ..monolithic import DEFAULT_RTOL
 
     p = sub.add_parser("reference", help="monolithic reference of a scene (one ODE, scipy)")
     add_scene_options(p)
@@ -30,7 +30,7 @@ def register(sub) -> None:
 def run_reference_command(args) -> int:
     from ..cosim.results import check_run_set, figure_png, run_figure
     from ..errors import OptionError
-    from ..reference import solve_reference, write_reference
+    from ..monolithic import solve_reference, write_reference
 
     scene = load_with_options(args)
     if args.rtol <= 0:

@@ -70,7 +70,8 @@ def _first_approximation(press, motor, u0: float, lag: bool, crank_mass):
 def mass_sweep(scene, masses=DEFAULT_MASSES, cases=CASES) -> dict:
     """{case: {"mass", "delta_sim", "delta_1", "L1", "J0"}} (arrays over `masses` [kg]; delta
     [1], L1 [N m], J0 [kg m^2]) plus "lag" and "m2_scene" [kg]. Progress on stderr."""
-    from .papers import press_steady_revolution, progress, progress_over
+    from .papers import press_steady_revolution
+    from .progress import progress, progress_over
 
     from .flywheel import eq28_conventions
 

@@ -106,7 +106,7 @@ def analytic(scene, J_f: np.ndarray, motor: str = "motor", press: str = "press")
                             u0)
     i2 = model.p.gear_ratio ** 2
     W, J_D, J_M0, s = conv["omega0"], conv["J_D"], conv["mean"]["J_M0"], conv["s"]
-    from .papers import progress_over
+    from .progress import progress_over
     return {
         "delta_1": np.array([pa.dynamic_error(drive(j), lag=lag).delta for j in
                              progress_over(J_f, "analyze flywheel", "flywheel")]),

@@ -30,7 +30,6 @@ modules' (nothing in physics/ imports this module).
 """
 from __future__ import annotations
 
-import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,18 +37,9 @@ from pathlib import Path
 import numpy as np
 
 from ..system.scene import SceneError
+from .progress import progress, progress_over  # noqa: F401 - progress: the analyses' notes
 
 TWO_PI = 2.0 * math.pi
-progress = logging.getLogger("crankfmu").info   # notes on stderr (-q hides them)
-
-
-def progress_over(items, label: str, unit: str):
-    """`items`, with a progress bar on stderr while they are worked through: on a terminal
-    only (tqdm's disable=None), and not with -q (which hides the notes too)."""
-    if not logging.getLogger("crankfmu").isEnabledFor(logging.INFO):
-        return items
-    from tqdm import tqdm
-    return tqdm(items, desc=label, unit=unit, disable=None, leave=False)
 A_FIGURE = 0.08  # m: base-link offset drawn in press_base_link.png (triangle height, ~ l/3)
 
 

@@ -30,7 +30,7 @@ import numpy as np
 from ...cosim.results import versions
 from ...masters import traits
 from ...outputs import atomic_write
-from ...reference import record_times, solve_reference, write_reference
+from ...monolithic import record_times, solve_reference, write_reference
 from ...cosim.metrics import Metric, MetricError, ReferenceSamples, observed_order
 
 FLOOR_FACTOR = 10.0  # errors below 10 x the FMUs' tolerance are not coupling errors
