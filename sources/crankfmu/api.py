@@ -132,7 +132,7 @@ def _result(recorder, metadata: dict, files: dict, title: str, statistics=None,
 
 
 def load_scene(scene):
-    """A scene file (.toml or .ssp) loaded and checked (crankfmu.system.load_scene)."""
+    """A scene file (.toml or .ssp) loaded and checked (crankfmu.system.load.load_scene)."""
     from .system.load import load_scene as _load
     return _load(_path(scene, "scene", "a path to a scene file (.toml or .ssp)", required=True))
 
