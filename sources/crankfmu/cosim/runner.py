@@ -215,32 +215,42 @@ def _companions(options: RunOptions):
     return Companions(options.jobs)
 
 
+@dataclass
+class LoadedRun:
+    """A scene's FMUs loaded, checked and wired to its master: what stepping needs."""
+    fmus: dict[str, FmuInstance]
+    system: System
+    master: object            # a crankfmu.masters.Master
+    recorder: Recorder
+    readers: list             # (read, columns) per component: _sample
+    log: LogCollector
+
+
+@dataclass
+class Stepped:
+    """How stepping a run went: the steps taken, its wall and CPU time (initialization to the
+    FMUs' release), and why it stopped early (`failure`, None for a run that completed) as
+    the sidecar's "outcome": "completed", "failed" or "interrupted"."""
+    steps: int
+    wall_seconds: float
+    cpu_seconds: float
+    failure: str | None = None
+    outcome: str = "completed"
+
+
 def _prepare_and_run(scene, options, out, log, fmu_dir, companions) -> RunResult:
-    fmus = load_fmus(scene, fmu_dir, log)
-    try:
-        check_components(scene, fmus)
-        links = check_links(scene, fmus)
-        check_physics(scene, fmus)
-        system = System(scene, fmus, links)
-        try:
-            master = make_master(scene.master.algorithm, system, scene.master)
-        except OptionError as err:  # an option set in code, checked against its declaration
-            key, _, message = str(err).partition(": ")
-            raise SceneError(scene.path, key, message) from None
-        except ValueError as err:  # e.g. an FMU that cannot roll back, for a master that must
-            raise SceneError(scene.path, "[master]", str(err)) from None
-        check_loops(scene, fmus, links, master)
-        recorder, readers = _recorder(scene, fmus)
-    except BaseException:
-        close_fmus(fmus)
-        raise
+    """Load, step, and turn the stepping into the run's result and files (a run that stopped
+    early writes its rows and raises RunError: _stop)."""
+    loaded = _load(scene, fmu_dir, log)
     # the FMUs are built now: the companions can load them beside this run
     pending = submit_companions(scene, fmu_dir, companions, options.progress) \
         if companions is not None else None
     try:
-        with _Interrupt() as interrupt:
-            result = _run(scene, options, out, log, fmus, system, master, recorder, readers,
-                          interrupt)
+        with _Interrupt() as interrupt:  # Ctrl-C counted, not raised, until the rows are out
+            stepped = _step(scene, loaded, options, interrupt)
+            result = _run_result(scene, loaded, stepped, options.extra_sidecar)
+            if stepped.failure:
+                _stop(out, result, stepped)
     except BaseException:
         for _, companion in pending or ():
             companion.cancel()
@@ -262,6 +272,30 @@ def _prepare_and_run(scene, options, out, log, fmu_dir, companions) -> RunResult
     return result
 
 
+def _load(scene: Scene, fmu_dir, log: LogCollector) -> LoadedRun:
+    """The scene's FMUs loaded and checked against it, wired into a System, its master made
+    and the recorder ready; the FMUs are released if anything fails."""
+    fmus = load_fmus(scene, fmu_dir, log)
+    try:
+        check_components(scene, fmus)
+        links = check_links(scene, fmus)
+        check_physics(scene, fmus)
+        system = System(scene, fmus, links)
+        try:
+            master = make_master(scene.master.algorithm, system, scene.master)
+        except OptionError as err:  # an option set in code, checked against its declaration
+            key, _, message = str(err).partition(": ")
+            raise SceneError(scene.path, key, message) from None
+        except ValueError as err:  # e.g. an FMU that cannot roll back, for a master that must
+            raise SceneError(scene.path, "[master]", str(err)) from None
+        check_loops(scene, fmus, links, master)
+        recorder, readers = _recorder(scene, fmus)
+    except BaseException:
+        close_fmus(fmus)
+        raise
+    return LoadedRun(fmus, system, master, recorder, readers, log)
+
+
 def _add_estimate(scene: Scene, fmu_dir, result: RunResult, pending: list) -> None:
     """Collect the companions, put the estimate in the result's metadata."""
     from .estimate import recorder_series
@@ -269,60 +303,73 @@ def _add_estimate(scene: Scene, fmu_dir, result: RunResult, pending: list) -> No
     result.metadata["error_estimate"] = result.estimate.to_json()
 
 
-def _run(scene, options, out, log, fmus, system, master, recorder, readers, interrupt):
-    h, t0 = scene.master.step, scene.start_time
+def _step(scene: Scene, run: LoadedRun, options: RunOptions, interrupt) -> Stepped:
+    """Initialize the FMUs and step the master to the stop time, recording rows; a failure
+    (divergence, an FMU call, a value that is not finite) or Ctrl-C ends the stepping with the
+    rows so far and says why (Stepped.failure). The FMUs are released in any case."""
+    master, t0 = run.master, scene.start_time
     wall, cpu = time.perf_counter(), time.process_time()
     failure = outcome = None
     step, t = 0, t0
     try:
-        _setup(scene, fmus, log)
+        _setup(scene, run.fmus, run.log)
         master.initialize(t0)
-        _sample(recorder, readers, t0)
+        _sample(run.recorder, run.readers, t0)
         loop = _variable_steps if master.variable_step else _fixed_steps
         for step, t, t_new, record in loop(master, scene, options.progress, options.label):
             if interrupt.requested:
                 break
             master.check_finite(t_new)
             if record:
-                _sample(recorder, readers, t_new)
-        if interrupt.requested:
-            failure, outcome = f"interrupted (Ctrl-C) at t = {master.time or t0:.6g} s", \
-                "interrupted"
+                _sample(run.recorder, run.readers, t_new)
     except DivergenceError as err:
         failure, outcome = str(err), "failed"
     except FMICallException as err:
-        failure, outcome = _fmi_failure(err, fmus, log, master.time if master.time is not None
-                                        else t), "failed"
+        failure, outcome = _fmi_failure(err, run.fmus, run.log, master.time
+                                        if master.time is not None else t), "failed"
     except (ArithmeticError, ValueError, RuntimeError, OSError) as err:  # say it, keep the rows
         failure, outcome = f"stopped near t = {master.time or t:.6g} s: " \
                            f"{type(err).__name__}: {err}", "failed"
     finally:
         wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
-        close_fmus(fmus)
+        close_fmus(run.fmus)
     if interrupt.requested and not failure:
         failure, outcome = f"interrupted (Ctrl-C) at t = {master.time or t0:.6g} s", "interrupted"
+    return Stepped(step, wall, cpu, failure, outcome or "completed")
+
+
+def _run_result(scene: Scene, run: LoadedRun, stepped: Stepped, extra_sidecar: dict
+                ) -> RunResult:
+    """The run's result with the sidecar's content (metadata), nothing written yet."""
+    master, m = run.master, scene.master
     statistics = master.statistics()
-    m = scene.master
     metadata = {
-        "scene": str(scene.path), "name": scene.name, "status": failure or "completed",
-        "outcome": outcome or "completed", "rows": recorder.count,
-        "units": column_units(recorder),
-        "start_time": t0, "stop_time": scene.stop_time,
-        "master": {**m.resolved(), "step": h, "order": system.order},  # its declared options
+        "scene": str(scene.path), "name": scene.name, "status": stepped.failure or "completed",
+        "outcome": stepped.outcome, "rows": run.recorder.count,
+        "units": column_units(run.recorder),
+        "start_time": scene.start_time, "stop_time": scene.stop_time,
+        "master": {**m.resolved(), "step": m.step, "order": run.system.order},  # its options
         "components": {n: {"fmu": str(f.path), "parameters": scene.components[n].parameters,
-                           "effects": scene.components[n].effects} for n, f in fmus.items()},
-        "versions": versions(), "wall_seconds": wall, "cpu_seconds": cpu,
-        "communication_steps": step,
+                           "effects": scene.components[n].effects}
+                       for n, f in run.fmus.items()},
+        "versions": versions(), "wall_seconds": stepped.wall_seconds,
+        "cpu_seconds": stepped.cpu_seconds, "communication_steps": stepped.steps,
         "statistics": statistics, "master_statistics": master.master_statistics(),
-        "coupling_error": master.coupling_error(), **options.extra_sidecar}
-    result = RunResult(None, None, None, recorder, statistics, wall, step,
-                       master.master_statistics(), master.coupling_error(), metadata, cpu)
-    if failure:
-        csv = None
-        if out is not None:
-            csv, result.sidecar, _ = write_run_set(partial_paths(out)[0], recorder, metadata)
-        raise (RunInterrupted if outcome == "interrupted" else RunError)(failure, csv)
-    return result
+        "coupling_error": master.coupling_error(), **extra_sidecar}
+    return RunResult(None, None, None, run.recorder, statistics, stepped.wall_seconds,
+                     stepped.steps, master.master_statistics(), master.coupling_error(),
+                     metadata, stepped.cpu_seconds)
+
+
+def _stop(out: Path | None, result: RunResult, stepped: Stepped) -> None:
+    """A run that stopped early: its rows so far written beside any earlier result
+    (partial_paths), then RunError (RunInterrupted for Ctrl-C) saying why and where."""
+    csv = None
+    if out is not None:
+        csv, result.sidecar, _ = write_run_set(partial_paths(out)[0], result.recorder,
+                                               result.metadata)
+    raise (RunInterrupted if stepped.outcome == "interrupted" else RunError)(stepped.failure,
+                                                                              csv)
 
 
 def _write_result(scene: Scene, options: RunOptions, out: Path | None, result: RunResult,
