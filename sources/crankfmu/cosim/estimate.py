@@ -78,9 +78,13 @@ class Estimate:
 def order_rule(algorithm: str, extrapolation: int) -> tuple[float, tuple | None]:
     """(order, bounds of an observed order) of `crankfmu run`'s estimator: one companion, so
     the order is the master's design order p0 (crankfmu.masters.Traits.design_order:
-    extrapolation + 1 at a fixed step, 1 at a variable step)."""
+    extrapolation + 1 at a fixed step, 1 at a variable step). ValueError for a monolithic
+    master: it has no coupling error to estimate."""
     from ..masters import traits
-    return traits(algorithm).design_order(extrapolation), None
+    order = traits(algorithm).design_order(extrapolation)
+    if order is None:
+        raise ValueError(f"{algorithm} has no coupling error, so no design order")
+    return order, None
 
 
 def coarse_bounds(algorithm: str, extrapolation: int) -> tuple[float, float]:

@@ -22,7 +22,7 @@ from __future__ import annotations
 from ..errors import CrankfmuError
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -43,7 +43,7 @@ class ReferenceSamples:
 
     def __init__(self, times: np.ndarray, columns: dict[str, np.ndarray]):
         self.times, self.columns = np.asarray(times, dtype=float), columns
-        self._splines = {}
+        self._splines: dict = {}
 
     def at(self, name: str, t: np.ndarray) -> np.ndarray:
         t = np.asarray(t, dtype=float)
@@ -64,7 +64,7 @@ class Metric:
     name: str
     variables: list[str]
     cycles: int = 1
-    events: list[EventSpec] | None = None
+    events: list[EventSpec] = field(default_factory=list)  # metric events: its figures
 
     def describe(self) -> str:
         """What the error is, in one line: `formula` over `subject`."""

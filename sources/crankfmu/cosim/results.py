@@ -396,6 +396,6 @@ def structured(names, rows: np.ndarray) -> np.ndarray:
     """fmpy's layout: a structured array with the field "time", then one per name."""
     dtype = np.dtype([("time", np.float64)] + [(n, np.float64) for n in names])
     out = np.empty(len(rows), dtype=dtype)
-    for k, name in enumerate(dtype.names):
+    for k, name in enumerate(dtype.names or ()):
         out[name] = rows[:, k]
     return out

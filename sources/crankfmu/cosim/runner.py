@@ -9,6 +9,7 @@ import time
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from fmpy.fmi1 import FMICallException
 from lxml import etree
@@ -16,7 +17,7 @@ from lxml import etree
 from ..errors import CrankfmuError, InterruptedRun
 from ..system.scene import Scene, SceneError, check_run_size
 from ..fmu.instance import FmuInstance, LogCollector
-from ..masters import DivergenceError, OptionError, make_master, traits
+from ..masters import DivergenceError, Master, OptionError, make_master, traits
 from ..masters.inputs import split_at_edges, step_edges
 from .results import (Recorder, check_record_size, check_run_set, column_units, failed_csv,
                       figure_png, normalize_unit, run_figure, versions, write_run_set)
@@ -63,7 +64,7 @@ class RunResult:
     coupling_error: dict = field(default_factory=dict)
     metadata: dict = field(default_factory=dict)  # the sidecar's content (also when not written)
     cpu_seconds: float = 0.0  # this process's CPU from initialization to the FMUs' release
-    estimate: object | None = None  # cosim.estimate.Estimate when RunOptions.estimate
+    estimate: Any = None  # cosim.estimate.Estimate when RunOptions.estimate
 
 
 @dataclass
@@ -220,7 +221,7 @@ class LoadedRun:
     """A scene's FMUs loaded, checked and wired to its master: what stepping needs."""
     fmus: dict[str, FmuInstance]
     system: System
-    master: object            # a crankfmu.masters.Master
+    master: Master
     recorder: Recorder
     readers: list             # (read, columns) per component: _sample
     log: LogCollector
@@ -368,8 +369,8 @@ def _stop(out: Path | None, result: RunResult, stepped: Stepped) -> None:
     if out is not None:
         csv, result.sidecar, _ = write_run_set(partial_paths(out)[0], result.recorder,
                                                result.metadata)
-    raise (RunInterrupted if stepped.outcome == "interrupted" else RunError)(stepped.failure,
-                                                                              csv)
+    raise (RunInterrupted if stepped.outcome == "interrupted" else RunError)(
+        stepped.failure or stepped.outcome, csv)
 
 
 def _write_result(scene: Scene, options: RunOptions, out: Path | None, result: RunResult,

@@ -31,6 +31,7 @@ from __future__ import annotations
 import copy
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from ..errors import CrankfmuError
@@ -66,7 +67,7 @@ class TargetReport:
     runs: list = field(default_factory=list)  # (algorithm, extrapolation, step, tol, seconds)
     wall_seconds: float = 0.0
     reasons: list = field(default_factory=list)
-    echo: object = None  # a callable taking a line of progress (the command line prints it)
+    echo: Callable[[str], None] | None = None  # a line of progress (the command line prints it)
 
     def add_run(self, algorithm, extrapolation, step, tolerance, seconds, how="") -> None:
         self.runs.append((algorithm, extrapolation, step, tolerance, seconds))
@@ -305,6 +306,7 @@ def write_chosen(scene, result, report: TargetReport, out, plot_png: bool = Fals
     from .results import figure_png, run_figure, write_run_set
     from .runner import plot_roles
     from .trust import judge_result
+    assert report.estimate is not None  # the search's accepted estimate (a met target)
     result.estimate = report.estimate
     result.metadata["error_estimate"] = report.estimate.to_json()
     result.metadata["target"] = report.to_json()

@@ -274,7 +274,7 @@ class ModelExchange(Master):
                 if t == t0 and zero[i]:
                     return math.nan
                 return self.indicators(t, y)[i]
-            event.terminal, event.direction = True, 0.0
+            event.terminal, event.direction = True, 0.0  # type: ignore[attr-defined]  # scipy's
             events.append(event)
         return events
 

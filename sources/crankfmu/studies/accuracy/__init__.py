@@ -20,7 +20,7 @@ from .report import (COLUMNS, UNITS, format_orders, format_outcome, format_table
                      plot_work_precision, table_row, write_table_csv)
 from .sweep import (FLOOR_FACTOR, UNSTABLE_ERROR, Outcome, Setting, check_run_files, cheapest,
                     fewest_steps, load_or_solve_reference, orders,
-                    read_reference_file, reference_grid, resume_key, run_one, run_settings,
+                    read_reference_file, reference_grid, resume_key, run_settings,
                     settings_for)
 
 DEFAULT_STEP_FACTORS = (4.0, 2.0, 1.0, 0.5)          # x the scene's step
