@@ -10,17 +10,20 @@ import re
 
 import pytest
 
-from tests.conftest import SCENARIOS
+from tests.conftest import ROOT, SCENARIOS
 
 
-def _commands(parser, path=()):
-    """(command path, parser) for every leaf subcommand."""
-    subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
-    if not subs:
-        yield path, parser
-        return
-    for name, sub in subs[0].choices.items():
-        yield from _commands(sub, path + (name,))
+def _cli_doc():
+    """scripts/cli_doc.py as a module: the parser walk and the docs page it writes."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("cli_doc", ROOT / "scripts" / "cli_doc.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+CLI_DOC = _cli_doc()
+_commands = CLI_DOC.leaves  # (command path, parser) for every leaf subcommand
 
 
 def _reads(source: str, dest: str) -> bool:
@@ -277,12 +280,7 @@ def test_no_help_names_a_source_folder():
 
 def test_docs_cli_page_lists_every_option():
     """docs/cli.md's reference part is what scripts/cli_doc.py writes from the parsers now."""
-    import importlib.util
-
-    from tests.conftest import ROOT
-    spec = importlib.util.spec_from_file_location("cli_doc", ROOT / "scripts" / "cli_doc.py")
-    cli_doc = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(cli_doc)
+    cli_doc = CLI_DOC
     page = cli_doc.PAGE.read_text()
     assert cli_doc.page_with(cli_doc.generated(), page) == page, \
         "docs/cli.md is stale: python scripts/cli_doc.py"
