@@ -125,7 +125,7 @@ def _setup(scene: Scene, fmus: dict[str, FmuInstance], log: LogCollector) -> Non
 def _recorder(scene: Scene, fmus) -> tuple[Recorder, list]:
     names = scene.record
     units = [fmus[r.split(".", 1)[0]].variable(r.split(".", 1)[1]).unit for r in names]
-    readers = []
+    readers: list[tuple] = []
     for comp in dict.fromkeys(r.split(".", 1)[0] for r in names):
         vars_ = [r.split(".", 1)[1] for r in names if r.split(".", 1)[0] == comp]
         readers.append((fmus[comp].reader(vars_), [names.index(f"{comp}.{v}") for v in vars_]))

@@ -154,7 +154,7 @@ class FmuInstance:
             status = get(self._component, vrs, n, buf)
             if status > FMI2_WARNING:
                 raise FMICallException(function="fmi2GetReal", status=status)
-            return values.tolist()
+            return values.tolist()  # type: ignore[return-value]  # "d": floats (typeshed: int)
         return read
 
     def writer(self, names: list[str]):

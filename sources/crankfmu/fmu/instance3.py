@@ -115,7 +115,7 @@ class Fmu3Instance(FmuInstance):
             status = get(self._component, vrs, n, buf, n)
             if status > FMI3_WARNING:
                 raise FMICallException(function="fmi3GetFloat64", status=status)
-            return values.tolist()
+            return values.tolist()  # type: ignore[return-value]  # "d": floats (typeshed: int)
         return read
 
     def writer(self, names: list[str]):
