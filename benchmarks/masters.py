@@ -398,8 +398,8 @@ def floor_table(out: Path, setting: tuple, target: float = 1e-4, repeats: int = 
     from crankfmu.studies.accuracy.sweep import load_or_solve_reference
     from crankfmu.fmu import instance as fmu_module
     from crankfmu.cosim.runner import RunOptions, run_scene
-    from crankfmu.reference.composed import ComposedModel
-    from crankfmu.reference.solve import RecordMap, record_times
+    from crankfmu.monolithic.composed import ComposedModel
+    from crankfmu.monolithic.solve import RecordMap, record_times
     from crankfmu.system.load import load_scene
 
     scene = load_scene(ROOT / "scenarios" / "servo_press.toml")

@@ -49,7 +49,8 @@ def main(argv=None) -> int:
         print(f"== {scene.name}", flush=True)
         steps = [f * scene.master.step for f in STEP_FACTORS]
         result = run_accuracy(scene, AccuracyOptions(out_dir=args.out / scene.name, steps=steps,
-                                                     jobs=args.jobs, progress=False))
+                                                     jobs=args.jobs, progress=False,
+                                                     plot=scene.name in PLOTS))
         wall = time.perf_counter() - t0
         sections.append(section(scene, result, [cheapest(result.outcomes, t) for t in TARGETS],
                                 wall))

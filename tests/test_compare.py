@@ -106,7 +106,7 @@ def test_compare_command_servo_vs_conventional(fmus, tmp_path, capsys):
     out = tmp_path / "swap"
     assert main(["compare", str(SCENARIOS / "servo_press.toml"),
                  str(SCENARIOS / "conventional_press.toml"), "--out", str(out),
-                 "--stop-time", "1.0", "--fmus", str(fmus), "--no-progress"]) == 0
+                 "--stop-time", "1.0", "--fmus", str(fmus), "--no-progress", "--plot"]) == 0
     text = capsys.readouterr().out
     assert "cycle_time" in text and "energy_per_stroke" in text
     for name in ("compare.csv", "compare.png", "servo_press.csv", "conventional_press.csv"):

@@ -60,7 +60,7 @@ def test_compare_on_a_pool_equals_serial(fmu_dir, tmp_path):
     serial = compare_scenes(*scenes(), tmp_path / "serial", options)
     with LocalPoolExecutor(2) as pool:
         parallel = compare_scenes(*scenes(), tmp_path / "pool", options, pool)
-    assert serial["text"] == parallel["text"]
+    assert serial.text == parallel.text
     for name in ("compare.csv", "servo_press.csv", "with_flywheel.csv"):
         assert (tmp_path / "serial" / name).read_bytes() == (tmp_path / "pool" / name).read_bytes()
 
@@ -101,7 +101,7 @@ def test_accuracy_and_compare_on_a_dask_cluster_equal_serial(fmu_dir, tmp_path):
             (ob.setting, ob.status, ob.error, ob.do_steps)
         name = f"runs/{oa.setting.label}.csv"
         assert (tmp_path / "serial" / name).read_bytes() == (tmp_path / "dask" / name).read_bytes()
-    assert serial_cmp["text"] == dask_cmp["text"]
+    assert serial_cmp.text == dask_cmp.text
     assert (tmp_path / "cmp_serial" / "compare.csv").read_bytes() == \
         (tmp_path / "cmp_dask" / "compare.csv").read_bytes()
 

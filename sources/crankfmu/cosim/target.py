@@ -31,11 +31,12 @@ from __future__ import annotations
 import copy
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from ..errors import CrankfmuError
 
-from .estimate import (STEP_RATIO, Estimate, difference, nominal_order, richardson,
+from .estimate import (STEP_RATIO, Estimate, difference, order_rule, richardson,
                        scene_metric, with_metric_record)
 
 START_FACTOR = 32.0      # the first step, x the scene's step (the sweep's coarsest): measured
@@ -66,7 +67,7 @@ class TargetReport:
     runs: list = field(default_factory=list)  # (algorithm, extrapolation, step, tol, seconds)
     wall_seconds: float = 0.0
     reasons: list = field(default_factory=list)
-    echo: object = None  # a callable taking a line of progress (the command line prints it)
+    echo: Callable[[str], None] | None = None  # a line of progress (the command line prints it)
 
     def add_run(self, algorithm, extrapolation, step, tolerance, seconds, how="") -> None:
         self.runs.append((algorithm, extrapolation, step, tolerance, seconds))
@@ -98,7 +99,7 @@ def search(scene, target: float, fmu_dir=None, jobs: int = 1, echo=None):
     with the report's reasons when no candidate meets the target. `jobs` > 1: the companions
     of each run execute in worker processes beside it (cosim/companions.py). `echo`: called
     with a line after each run and each estimate (progress)."""
-    from ..masters import MASTERS
+    from ..masters import traits
     from .companions import Companions
     if not (target > 0 and math.isfinite(target)):
         raise ValueError(f"--target must be a positive number, got {target!r}")
@@ -109,8 +110,7 @@ def search(scene, target: float, fmu_dir=None, jobs: int = 1, echo=None):
     try:
         fmu_dir = _built_fmus(scene, fmu_dir)
         for algorithm, extrapolation in candidates(scene):
-            variable = bool(getattr(MASTERS.get(algorithm), "variable_step", False))
-            walk = _tolerance_walk if variable else _step_ladder
+            walk = _tolerance_walk if traits(algorithm).variable_step else _step_ladder
             found = walk(scene, algorithm, extrapolation, target, fmu_dir, report, pool)
             if found is not None:
                 result, est, trial = found
@@ -164,7 +164,7 @@ def _step_ladder(scene, algorithm, extrapolation, target, fmu_dir, report, pool)
     h0 / 2^k; `rungs` maps k to the run's (series, result)."""
     metric = scene_metric(scene)
     label = f"{algorithm}, extrapolation {extrapolation}"
-    nominal = nominal_order(extrapolation)
+    nominal, _ = order_rule(algorithm, extrapolation)
     h_min = scene.master.step * MIN_STEP_FACTOR
     # at least MIN_START_STEPS steps over the run: a step longer than the run is no step
     # (a power of 2 x the scene's step, so the steps tried are those of the accuracy sweep)
@@ -306,6 +306,7 @@ def write_chosen(scene, result, report: TargetReport, out, plot_png: bool = Fals
     from .results import figure_png, run_figure, write_run_set
     from .runner import plot_roles
     from .trust import judge_result
+    assert report.estimate is not None  # the search's accepted estimate (a met target)
     result.estimate = report.estimate
     result.metadata["error_estimate"] = report.estimate.to_json()
     result.metadata["target"] = report.to_json()
