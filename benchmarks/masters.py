@@ -175,6 +175,8 @@ def crankfmu_seconds(scene, algorithm: str, extrapolation: int, n: int) -> tuple
         trial.master.algorithm, trial.master.extrapolation = algorithm, extrapolation
         trial.stop_time = trial.start_time + k * n * trial.master.step
         trial.master.max_steps = 10**12  # the adaptive master's min_step bound, not its steps
+        if algorithm == "adaptive":  # rows the run may record are bounded by stop / min_step
+            trial.master.min_step = trial.master.step
         start = CLOCK()
         result = run_scene(trial, RunOptions(out=None, progress=False))
         cpu.append(CLOCK() - start)
