@@ -9,6 +9,8 @@ tests/, scripts/ and benchmarks/: paths under the repository's folders (tests/..
 benchmarks/..., scenarios/..., sources/...), paths inside the package (cosim/runner.py,
 models/dc_motor/README.md, ...), and dotted names crankfmu.x.y (a module, or an attribute of the
 longest module prefix).
+
+And README.md stays a README (at most README_MOST_LINES lines) that links every docs/*.md page.
 """
 from __future__ import annotations
 
@@ -86,3 +88,16 @@ def test_the_checker_finds_a_stale_name(tmp_path):
     finally:
         fake.unlink()
     assert len(found) == 5, found
+
+
+README_MOST_LINES = 250  # a README read in five minutes; the rest lives in docs/ (issue #28)
+
+
+def test_the_readme_is_short_and_links_every_docs_page():
+    """README.md fits its budget, and every docs/*.md page is reachable from it by a link."""
+    readme = (ROOT / "README.md").read_text()
+    lines = readme.count("\n") + (not readme.endswith("\n"))
+    assert lines <= README_MOST_LINES, f"README.md has {lines} lines, at most {README_MOST_LINES}"
+    linked = set(re.findall(r"\]\((docs/[\w.-]+\.md)(?:#[\w-]*)?\)", readme))
+    pages = {f"docs/{p.name}" for p in (ROOT / "docs").glob("*.md")}
+    assert pages - linked == set(), f"docs pages the README does not link: {sorted(pages - linked)}"
