@@ -4,8 +4,8 @@ masters/base.py named tests/examples/masters/halving.py, masters/history.py and 
 missing tests/test_master_parts.py, runtime/model.py a crankfmu.studies.reference, the model
 cards a MODELS.md that is not in the repository).
 
-Checked in README.md, docs/*.md, the model cards, tests' .md files and every .py file of sources/,
-tests/, scripts/ and benchmarks/: paths under the repository's folders (tests/..., docs/..., scripts/...,
+Checked in README.md, docs/*.md, the model cards, tests' .md files, the scene files' comments
+(scenarios/**/*.toml) and every .py file of sources/, tests/, scripts/ and benchmarks/: paths under the repository's folders (tests/..., docs/..., scripts/...,
 benchmarks/..., scenarios/..., sources/...), paths inside the package (cosim/runner.py,
 models/dc_motor/README.md, ...), and dotted names crankfmu.x.y (a module, or an attribute of the
 longest module prefix).
@@ -33,7 +33,8 @@ NOT_HERE = ("MODELS.md", "DESIGN.md")  # the project's planning notes, outside t
 
 def texts() -> list[Path]:
     files = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")),
-             *sorted(PACKAGE.rglob("*.md")), *sorted((ROOT / "tests").rglob("*.md"))]
+             *sorted(PACKAGE.rglob("*.md")), *sorted((ROOT / "tests").rglob("*.md")),
+             *sorted((ROOT / "scenarios").rglob("*.toml"))]
     for top in ("sources", "tests", "scripts", "benchmarks"):
         files += sorted((ROOT / top).rglob("*.py"))
     return [f for f in files if "__pycache__" not in f.parts and f != Path(__file__)]
