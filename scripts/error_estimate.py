@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from crankfmu.masters import traits
+from generated_page import write_generated  # scripts/, beside this file
 
 ROOT = Path(__file__).resolve().parents[1]
 FACTORS = (4.0, 2.0, 1.0, 0.5)     # the default sweep: x the scene's step
@@ -264,7 +265,8 @@ def main(argv=None) -> int:
     summary.append(line("all", total))
     print("\n".join(summary))
     if args.markdown:
-        args.markdown.write_text("\n".join(summary) + "\n\n" + "\n\n".join(sections) + "\n")
+        write_generated(args.markdown, "\n".join(summary) + "\n\n" + "\n\n".join(sections) + "\n",
+                        "scripts/error_estimate.py")
         print(f"wrote {args.markdown}")
     return 0
 

@@ -108,7 +108,7 @@ def planetary(tmp_path, fmus, executor, steps, **options):
 
 def test_planetary_lock_time_converges_first_order(tmp_path, hybrid_fmus, one_worker):
     """Gauss-Seidel with the held motor torque: the lock-time error is first order in the step
-    (README). Slope between 4e-4 and 2e-4 s within 0.8-1.2: measured 1.00."""
+    (docs/accuracy.md). Slope between 4e-4 and 2e-4 s within 0.8-1.2: measured 1.00."""
     result = planetary(tmp_path, hybrid_fmus, one_worker, [4e-4, 2e-4])
     lock = [o.extra["events"]["drive.t_lock_b at end"] for o in result.outcomes]
     assert all(o.status == "completed" for o in result.outcomes)

@@ -1,5 +1,6 @@
 """`[swap]` scenes and `crankfmu compare`: swap resolution, the metrics on signals with known
-answers, and the README example (servo_press vs conventional_press) end to end on short runs."""
+answers, and the docs example (docs/compare.md: servo_press vs conventional_press) end to end on
+short runs."""
 from __future__ import annotations
 
 import csv
@@ -95,7 +96,7 @@ def test_metrics_known_answers():
     assert metrics(still)["strokes"] == 0 and math.isnan(metrics(still)["cycle_time"])
 
 
-# -- the README example, short ------------------------------------------------------------------
+# -- the docs example, short --------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def fmus(fmu_dir):
     return fmu_dir  # the session's catalog (tests/conftest.py)

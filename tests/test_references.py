@@ -4,11 +4,13 @@ masters/base.py named tests/examples/masters/halving.py, masters/history.py and 
 missing tests/test_master_parts.py, runtime/model.py a crankfmu.studies.reference, the model
 cards a MODELS.md that is not in the repository).
 
-Checked in README.md, docs/*.md, the model cards, tests' .md files and every .py file of sources/,
-tests/, scripts/ and benchmarks/: paths under the repository's folders (tests/..., docs/..., scripts/...,
+Checked in README.md, docs/*.md, the model cards, tests' .md files, the scene files' comments
+(scenarios/**/*.toml) and every .py file of sources/, tests/, scripts/ and benchmarks/: paths under the repository's folders (tests/..., docs/..., scripts/...,
 benchmarks/..., scenarios/..., sources/...), paths inside the package (cosim/runner.py,
 models/dc_motor/README.md, ...), and dotted names crankfmu.x.y (a module, or an attribute of the
 longest module prefix).
+
+And README.md stays a README (at most README_MOST_LINES lines) that links every docs/*.md page.
 """
 from __future__ import annotations
 
@@ -31,7 +33,8 @@ NOT_HERE = ("MODELS.md", "DESIGN.md")  # the project's planning notes, outside t
 
 def texts() -> list[Path]:
     files = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")),
-             *sorted(PACKAGE.rglob("*.md")), *sorted((ROOT / "tests").rglob("*.md"))]
+             *sorted(PACKAGE.rglob("*.md")), *sorted((ROOT / "tests").rglob("*.md")),
+             *sorted((ROOT / "scenarios").rglob("*.toml"))]
     for top in ("sources", "tests", "scripts", "benchmarks"):
         files += sorted((ROOT / top).rglob("*.py"))
     return [f for f in files if "__pycache__" not in f.parts and f != Path(__file__)]
@@ -86,3 +89,16 @@ def test_the_checker_finds_a_stale_name(tmp_path):
     finally:
         fake.unlink()
     assert len(found) == 5, found
+
+
+README_MOST_LINES = 250  # a README read in five minutes; the rest lives in docs/ (issue #28)
+
+
+def test_the_readme_is_short_and_links_every_docs_page():
+    """README.md fits its budget, and every docs/*.md page is reachable from it by a link."""
+    readme = (ROOT / "README.md").read_text()
+    lines = readme.count("\n") + (not readme.endswith("\n"))
+    assert lines <= README_MOST_LINES, f"README.md has {lines} lines, at most {README_MOST_LINES}"
+    linked = set(re.findall(r"\]\((docs/[\w.-]+\.md)(?:#[\w-]*)?\)", readme))
+    pages = {f"docs/{p.name}" for p in (ROOT / "docs").glob("*.md")}
+    assert pages - linked == set(), f"docs pages the README does not link: {sorted(pages - linked)}"

@@ -14,7 +14,7 @@ estimate then costs the slower of the two in wall time instead of their sum.
     submit(run, *args) -> Pending; Pending.result() -> run(*args), a CompanionRun
                           (run: a module-level function, cosim.runner.run_companion)
 
-Measured (benchmarks/estimate_cost.py, benchmarks/target.py; README "What it costs"): a worker
+Measured (benchmarks/estimate_cost.py, benchmarks/target.py; docs/error_estimate.md, "What it costs"): a worker
 takes about 0.35 s to start and needs a free core; it pays on runs of a second or more and
 costs more on shorter ones or when the cores are busy, so the command line's default is 1.
 

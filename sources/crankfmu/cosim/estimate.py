@@ -13,12 +13,12 @@ estimate is d 2^p / (2^p - 1), between 1.07 d and 2 d whatever p is) or at a ten
 variable-step master's tolerance (p = 1: about 1.1 d). The finer run is nearer the asymptotic
 range than the run, so d measures the run's own error; coarse companions (2h and 4h, the order
 observed from the three runs) were cheaper but off more often: scripts/error_estimate.py
-measured the variants over the accuracy sweeps (README, "How wrong is a run, without a
-reference"). The `--target` search (cosim/target.py) uses the same form on its own runs.
+measured the variants over the accuracy sweeps (docs/error_estimate.md, "How
+often it is right"). The `--target` search (cosim/target.py) uses the same form on its own runs.
 
 Cost: the companion takes twice the run's communication steps (fixed step) or the steps of a
 tenth of the tolerance (about 10^(1/(extrapolation + 1)) x); the FMUs' own integration does not
-grow with the step count, so the wall time grows less (README). With a spare core it runs in a
+grow with the step count, so the wall time grows less (docs/error_estimate.md). With a spare core it runs in a
 worker beside the run (cosim/companions.py; `crankfmu run --jobs`). When it is wrong: the
 companion counts other events than the run (no estimate, the reason says so) or stops (no
 estimate), the run sits at the FMUs' tolerance floor (the difference is solver noise).

@@ -14,7 +14,7 @@ already meets the target, three or four otherwise.
 (The search used to estimate from the coarser rungs 2h and 4h, which costs no extra run but was
 right less often: on the conventional press and the clutch hammer it accepted runs 1.7x and
 1.4x above the target. The companion at h/2 is the form measured within 3x in 96 % of the
-sweeps' runs: README, "How wrong is a run".)
+sweeps' runs: docs/error_estimate.md.)
 With jobs > 1 a round's two runs go side by side, the finer (slower) here and the other in a
 worker process (cosim/companions.py): the same runs and the same choice, in the wall time of
 the slower one.
