@@ -83,7 +83,7 @@ class Candidate:
 
 
 def scene_setup(name: str, out: Path):
-    from crankfmu.reference.solve import record_times
+    from crankfmu.monolithic.solve import record_times
     from crankfmu.studies.accuracy import make_metric
     from crankfmu.studies.accuracy.sweep import load_or_solve_reference
     from crankfmu.system.load import load_scene
@@ -120,8 +120,8 @@ def cosimulation(scene, metric, ref, settings: dict, out: Path):
 def monolithic(scene, metric, ref, method: str, rtol: float):
     from scipy.integrate import solve_ivp
 
-    from crankfmu.reference.composed import ComposedModel
-    from crankfmu.reference.solve import RecordMap, record_times
+    from crankfmu.monolithic.composed import ComposedModel
+    from crankfmu.monolithic.solve import RecordMap, record_times
 
     model = ComposedModel(scene)
     rows = RecordMap(model)

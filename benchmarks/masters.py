@@ -175,6 +175,8 @@ def crankfmu_seconds(scene, algorithm: str, extrapolation: int, n: int) -> tuple
         trial.master.algorithm, trial.master.extrapolation = algorithm, extrapolation
         trial.stop_time = trial.start_time + k * n * trial.master.step
         trial.master.max_steps = 10**12  # the adaptive master's min_step bound, not its steps
+        if algorithm == "adaptive":  # rows the run may record are bounded by stop / min_step
+            trial.master.min_step = trial.master.step
         start = CLOCK()
         result = run_scene(trial, RunOptions(out=None, progress=False))
         cpu.append(CLOCK() - start)
@@ -398,8 +400,8 @@ def floor_table(out: Path, setting: tuple, target: float = 1e-4, repeats: int = 
     from crankfmu.studies.accuracy.sweep import load_or_solve_reference
     from crankfmu.fmu import instance as fmu_module
     from crankfmu.cosim.runner import RunOptions, run_scene
-    from crankfmu.reference.composed import ComposedModel
-    from crankfmu.reference.solve import RecordMap, record_times
+    from crankfmu.monolithic.composed import ComposedModel
+    from crankfmu.monolithic.solve import RecordMap, record_times
     from crankfmu.system.load import load_scene
 
     scene = load_scene(ROOT / "scenarios" / "servo_press.toml")

@@ -75,6 +75,13 @@ def test_estimate_is_in_the_sidecar(tmp_path, rotor_fmus):
     # one finer companion (h/2) with the design order extrapolation + 1
     assert side["knob"] == "step" and side["ratio"] == 0.5
     assert side["order_source"] == "nominal" and side["order"] == 2.0
+    # the metric it estimates, named (before: a bare number), and so the terminal line
+    assert side["metric"] == "max" and side["metric_description"] == \
+        "max_t |y - y_ref| / mean|y_ref| over r1.flange_w, r2.w"
+    from crankfmu.cosim.estimate import format_estimate
+    assert format_estimate(result.estimate).startswith(
+        f"estimated error {result.estimate.error:.2e} of r1.flange_w, r2.w "
+        "(max_t |y - y_ref| / mean|y_ref|): Richardson from a companion at 0.5 x the step")
 
 
 def test_accuracy_column_matches_the_run_estimate(tmp_path, rotor_fmus):
@@ -86,7 +93,7 @@ def test_accuracy_column_matches_the_run_estimate(tmp_path, rotor_fmus):
                                   "extrapolation": 2}, stop=0.3)
     result = run_accuracy(scene, AccuracyOptions(
         out_dir=tmp_path / "acc", algorithms=["gauss-seidel"], extrapolations=[2],
-        steps=[5e-3], fmu_dir=rotor_fmus, progress=False, jobs=1))
+        steps=[5e-3], fmu_dir=rotor_fmus, progress=False, jobs=1, plot=True))
     with open(result.csv) as f:
         rows = list(csv.DictReader(f))
     assert len(rows) == 1  # the companion (2.5 ms) is not a row of the table

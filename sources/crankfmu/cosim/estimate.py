@@ -14,12 +14,12 @@ whatever p is) or at a tenth of a
 variable-step master's tolerance (p = 1: about 1.1 d). The finer run is nearer the asymptotic
 range than the run, so d measures the run's own error; coarse companions (2h and 4h, the order
 observed from the three runs) were cheaper but off more often: scripts/error_estimate.py
-measured the variants over the accuracy sweeps (README, "How wrong is a run, without a
-reference"). The `--target` search (cosim/target.py) uses the same form on its own runs.
+measured the variants over the accuracy sweeps (docs/error_estimate.md, "How
+often it is right"). The `--target` search (cosim/target.py) uses the same form on its own runs.
 
 Cost: the companion takes twice the run's communication steps (fixed step) or the steps of a
 tenth of the tolerance (about 10^(1/(extrapolation + 1)) x); the FMUs' own integration does not
-grow with the step count, so the wall time grows less (README). With a spare core it runs in a
+grow with the step count, so the wall time grows less (docs/error_estimate.md). With a spare core it runs in a
 worker beside the run (cosim/companions.py; `crankfmu run --jobs`). When it is wrong: the
 companion counts other events than the run (no estimate, the reason says so) or stops (no
 estimate), the run sits at the FMUs' tolerance floor (the difference is solver noise).
@@ -51,6 +51,10 @@ class Estimate:
     differences: list[float] = field(default_factory=list)  # d(run, c1), d(c1, c2) [1]
     companion_seconds: float = 0.0  # wall time of the companion runs
     reason: str = ""
+    metric: str = ""                # the metric's key (cosim/metrics.py: max, steady, events)
+    metric_description: str = ""    # Metric.describe(): what the error is of, and how formed
+    subject: str = ""               # Metric.subject: what the error is of
+    formula: str = ""               # Metric.formula, with y_ref the exact solution
 
     @property
     def ok(self) -> bool:
@@ -64,33 +68,32 @@ class Estimate:
     def to_json(self) -> dict:
         def num(x):
             return x if isinstance(x, (int, float)) and math.isfinite(x) else None
-        return {"estimated_error": num(self.error), "method": "richardson",
+        return {"estimated_error": num(self.error), "metric": self.metric,
+                "metric_description": self.metric_description, "method": "richardson",
                 "order": num(self.order), "order_source": self.order_source,
                 "ratio": self.ratio, "knob": self.knob,
                 "differences": [num(d) for d in self.differences],
                 "companion_seconds": self.companion_seconds, "reason": self.reason}
 
 
-def nominal_order(extrapolation: int, taylor: int = 0) -> float:
-    """The fixed-step masters' design order: extrapolation p gives global order p + 1, a Taylor
-    coupling of order q ([master].taylor, masters/taylor.py) q + 1 (measured on the two-mass
-    oscillator: tests/test_taylor_coupling.py)."""
-    return float(taylor + 1 if taylor else extrapolation + 1)
-
-
-def order_rule(variable_step: bool, extrapolation: int, taylor: int = 0
+def order_rule(algorithm: str, extrapolation: int, taylor: int = 0
                ) -> tuple[float, tuple | None]:
     """(order, bounds of an observed order) of `crankfmu run`'s estimator: one companion, so
-    the order is the design order p0 (fixed step) or 1 (variable step: the error follows the
-    tolerance, whatever the coupling)."""
-    return (1.0 if variable_step else nominal_order(extrapolation, taylor)), None
+    the order is the master's design order p0 (crankfmu.masters.Traits.design_order:
+    extrapolation + 1 at a fixed step, taylor + 1 with a Taylor coupling, 1 at a variable
+    step). ValueError for a monolithic master: it has no coupling error to estimate."""
+    from ..masters import traits
+    order = traits(algorithm).design_order(extrapolation, taylor)
+    if order is None:
+        raise ValueError(f"{algorithm} has no coupling error, so no design order")
+    return order, None
 
 
-def coarse_bounds(extrapolation: int, taylor: int = 0) -> tuple[float, float]:
+def coarse_bounds(algorithm: str, extrapolation: int, taylor: int = 0) -> tuple[float, float]:
     """Bounds of the order observed from companions at 2h and 4h (the --target search):
     [p0, p0 + 1] (Gauss-Seidel and the iterative master gain an order on some scenes; outside
     that range the observed ratio was noise: scripts/error_estimate.py)."""
-    p0 = nominal_order(extrapolation, taylor)
+    p0, _ = order_rule(algorithm, extrapolation, taylor)
     return p0, p0 + 1.0
 
 
@@ -122,7 +125,9 @@ def richardson(metric: Metric, runs: list[tuple], ratio: float, knob: str,
     With two companions the order is observed, clamped to `bounds` (default
     [ORDER_MIN, ORDER_MAX]), else `nominal`."""
     lo, hi = bounds or (ORDER_MIN, ORDER_MAX)
-    est = Estimate(ratio=ratio, knob=knob)
+    est = Estimate(ratio=ratio, knob=knob, metric=metric.name,
+                   metric_description=metric.describe(), subject=metric.subject,
+                   formula=metric.formula)
     d1, why = difference(metric, runs[0], runs[1])
     est.differences.append(d1)
     if not math.isfinite(d1):
@@ -144,11 +149,13 @@ def richardson(metric: Metric, runs: list[tuple], ratio: float, knob: str,
     return est
 
 
-def companion_knobs(algorithm_variable_step: bool, step: float, tolerance: float
+def companion_knobs(algorithm: str, step: float, tolerance: float
                     ) -> tuple[str, float, list[float]]:
-    """(knob, ratio, companion values) of `crankfmu run`'s estimate for a run at `step` and
-    `tolerance`: a finer companion, at half the step or a tenth of the tolerance."""
-    if algorithm_variable_step:
+    """(knob, ratio, companion values) of `crankfmu run`'s estimate for a run of the master
+    `algorithm` at `step` and `tolerance`: a finer companion, at half the step or (a
+    variable-step master) a tenth of the tolerance."""
+    from ..masters import traits
+    if traits(algorithm).knob == "tolerance":
         return "tolerance", 1.0 / RATIO_TOLERANCE, [tolerance / RATIO_TOLERANCE]
     return "step", 1.0 / STEP_RATIO, [step / STEP_RATIO]
 
@@ -196,6 +203,7 @@ def format_estimate(est: Estimate) -> str:
         where = f"a companion at {est.ratio:g} x the step"
     else:
         where = f"companions at {est.ratio:g} and {est.ratio ** 2:g} x the step"
-    return (f"estimated error {est.error:.2e} (Richardson from {where}, order {est.order:.2f} "
-            f"{est.order_source}; the companion runs took {est.companion_seconds:.2f} s)"
-            + (f"; {est.reason}" if est.reason else ""))
+    of = f" of {est.subject} ({est.formula})" if est.subject else ""
+    return (f"estimated error {est.error:.2e}{of}: Richardson from {where}, order "
+            f"{est.order:.2f} {est.order_source}; the companion runs took "
+            f"{est.companion_seconds:.2f} s" + (f"; {est.reason}" if est.reason else ""))

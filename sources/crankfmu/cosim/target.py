@@ -16,7 +16,7 @@ already meets the target, three or four otherwise.
 (The search used to estimate from the coarser rungs 2h and 4h, which costs no extra run but was
 right less often: on the conventional press and the clutch hammer it accepted runs 1.7x and
 1.4x above the target. The companion at h/2 is the form measured within 3x in 96 % of the
-sweeps' runs: README, "How wrong is a run".)
+sweeps' runs: docs/error_estimate.md.)
 With jobs > 1 a round's two runs go side by side, the finer (slower) here and the other in a
 worker process (cosim/companions.py): the same runs and the same choice, in the wall time of
 the slower one.
@@ -36,11 +36,12 @@ from __future__ import annotations
 import copy
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from ..errors import CrankfmuError
 
-from .estimate import (STEP_RATIO, Estimate, difference, nominal_order, richardson,
+from .estimate import (STEP_RATIO, Estimate, difference, order_rule, richardson,
                        scene_metric, with_metric_record)
 
 START_FACTOR = 32.0      # the first step, x the scene's step (the sweep's coarsest): measured
@@ -76,7 +77,7 @@ class TargetReport:
     #                                               tolerance, seconds)
     wall_seconds: float = 0.0
     reasons: list = field(default_factory=list)
-    echo: object = None  # a callable taking a line of progress (the command line prints it)
+    echo: Callable[[str], None] | None = None  # a line of progress (the command line prints it)
 
     def add_run(self, algorithm, coupling, step, tolerance, seconds, how="") -> None:
         """coupling: (extrapolation, taylor)."""
@@ -122,7 +123,7 @@ def search(scene, target: float, fmu_dir=None, jobs: int = 1, echo=None):
     with the report's reasons when no candidate meets the target. `jobs` > 1: the companions
     of each run execute in worker processes beside it (cosim/companions.py). `echo`: called
     with a line after each run and each estimate (progress)."""
-    from ..masters import MASTERS
+    from ..masters import traits
     from .companions import Companions
     if not (target > 0 and math.isfinite(target)):
         raise ValueError(f"--target must be a positive number, got {target!r}")
@@ -135,8 +136,7 @@ def search(scene, target: float, fmu_dir=None, jobs: int = 1, echo=None):
         from .coupling import taylor_orders_offered
         offered = taylor_orders_offered(scene, fmu_dir, (TAYLOR_ORDER,))
         for algorithm, coupling in candidates(scene, offered[0] if offered else 0):
-            variable = bool(getattr(MASTERS.get(algorithm), "variable_step", False))
-            walk = _tolerance_walk if variable else _step_ladder
+            walk = _tolerance_walk if traits(algorithm).variable_step else _step_ladder
             found = walk(scene, algorithm, coupling, target, fmu_dir, report, pool)
             if found is not None:
                 result, est, trial = found
@@ -196,7 +196,7 @@ def _step_ladder(scene, algorithm, coupling, target, fmu_dir, report, pool):
     h0 / 2^k; `rungs` maps k to the run's (series, result)."""
     metric = scene_metric(scene)
     label = f"{algorithm}, {coupling_text(coupling)}"
-    nominal = nominal_order(*coupling)
+    nominal, _ = order_rule(algorithm, *coupling)
     h_min = scene.master.step * MIN_STEP_FACTOR
     # at least MIN_START_STEPS steps over the run: a step longer than the run is no step
     # (a power of 2 x the scene's step, so the steps tried are those of the accuracy sweep)
@@ -338,6 +338,7 @@ def write_chosen(scene, result, report: TargetReport, out, plot_png: bool = Fals
     from .results import figure_png, run_figure, write_run_set
     from .runner import plot_roles
     from .trust import judge_result
+    assert report.estimate is not None  # the search's accepted estimate (a met target)
     result.estimate = report.estimate
     result.metadata["error_estimate"] = report.estimate.to_json()
     result.metadata["target"] = report.to_json()

@@ -10,7 +10,7 @@ import ctypes
 import os
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from fmpy.fmi1 import FMICallException
@@ -60,7 +60,7 @@ def release_pythonfmu_states() -> int:
         try:  # RTLD_NOLOAD: only a handle to the already loaded copy, never a new load
             lib = ctypes.CDLL(os.fsdecode(name), mode=os.RTLD_NOLOAD | os.RTLD_LAZY)
             release = lib.finalizePythonInterpreter
-            lib.fmi2Instantiate  # a pythonfmu FMU binary, not some other library
+            lib.fmi2Instantiate  # noqa: B018 - a probe: a pythonfmu FMU binary, not some other library
         except (OSError, AttributeError):
             continue
         release.restype = None
@@ -154,7 +154,7 @@ class FmuInstance:
             status = get(self._component, vrs, n, buf)
             if status > FMI2_WARNING:
                 raise FMICallException(function="fmi2GetReal", status=status)
-            return values.tolist()
+            return values.tolist()  # type: ignore[return-value]  # "d": floats (typeshed: int)
         return read
 
     def writer(self, names: list[str]):

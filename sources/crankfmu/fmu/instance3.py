@@ -76,7 +76,7 @@ class Fmu3Instance(FmuInstance):
         self.fmu = cls(guid=md.guid, unzipDirectory=self.unzip_dir,
                        modelIdentifier=kind.modelIdentifier, instanceName=name)
         self.slave = _Fmi3Calls(self)
-        self.experiment = (0.0, None, None)
+        self.experiment: tuple[float, float | None, float | None] = (0.0, None, None)
         self.stats = StepStatistics()
         self._log = log
         self._functions = self.fmu._functions
@@ -116,7 +116,7 @@ class Fmu3Instance(FmuInstance):
             status = get(self._component, vrs, n, buf, n)
             if status > FMI3_WARNING:
                 raise FMICallException(function="fmi3GetFloat64", status=status)
-            return values.tolist()
+            return values.tolist()  # type: ignore[return-value]  # "d": floats (typeshed: int)
         return read
 
     def writer(self, names: list[str]):

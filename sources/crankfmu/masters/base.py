@@ -2,7 +2,7 @@
 
 A master advances a wired `System` (FMUs, links, external inputs) over communication steps.
 A new master is one file with a `Master` subclass and one line in MASTERS
-(crankfmu/masters/__init__.py); README "Adding a master" walks through an example
+(crankfmu/masters/__init__.py); docs/masters.md, "Adding a master", walks through an example
 (tests/examples/masters/iterated_gauss_seidel.py). Implementers provide:
 
     name              the algorithm's name in scenes and on the command line (a key of MASTERS).

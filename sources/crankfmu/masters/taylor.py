@@ -63,9 +63,9 @@ class TaylorCoupling:
         # rows of degree q + 1 reach the FMUs (a sweep through the newest value)
         self.writers = {c: _row_writer(system, c, order + 1) for c in system.order}
         self.guess: dict[str, list] = {}  # rows at the end of the last step, from its polynomial
-        self.externals = None  # the external inputs' values at the last point
+        self.externals: list | None = None  # the external inputs' values at the last point
         self.rounds = 0
-        self._at = (None, {})  # (t, rows): a rejected step is retried from the same rows
+        self._at: tuple[float | None, dict[str, list]] = (None, {})  # (t, rows): a rejected step is retried from the same rows
 
     def _check(self, master_name: str) -> None:
         """Every component whose outputs are connected must offer their derivatives."""
@@ -93,7 +93,7 @@ class TaylorCoupling:
             else:
                 rows = self.exchange(t, dict(self.guess), 1)
             self.externals = externals
-            empty = [[] for _ in range(self.order + 1)]
+            empty: list[list] = [[] for _ in range(self.order + 1)]
             self._at = (t, {c: rows.get(c, empty) for c in self.system.order})
         return self._at[1]
 

@@ -3,7 +3,7 @@ the scipy path).
 
 A model is a set of ODEs with inputs, outputs, parameters and switchable effects. The same model
 object serves the FMU (through `crankfmu.runtime.slave.ModelSlave`) and the monolithic reference
-(`crankfmu.studies.reference`), so the equations exist once.
+(`crankfmu.monolithic`), so the equations exist once.
 
 Implementers subclass `PhysicsModel` and provide:
 

@@ -200,7 +200,7 @@ class AffineOutputs:
         """[y', ..., y^(order)]: C x^(k) + D u^(k) (input rows beyond u_rows are 0)."""
         out = []
         for k in range(1, order + 1):
-            sources = (x_rows[k], u_rows[k] if k < len(u_rows) else None)
+            sources: tuple = (x_rows[k], u_rows[k] if k < len(u_rows) else None)
             out.append([sum(c * sources[kind][j] for kind, j, c in terms
                             if sources[kind] is not None) for terms in self.terms])
         return out

@@ -319,7 +319,8 @@ def check_run_size(scene: "Scene", key: str = "[master].step") -> None:
     m, span = scene.master, scene.stop_time - scene.start_time
     limit = m.max_steps
     biggest = max(abs(scene.start_time), abs(scene.stop_time), 1.0)
-    variable = getattr(_masters().get(m.algorithm), "variable_step", False)
+    from ..masters import traits
+    variable = traits(m.algorithm).variable_step
     smallest, which = (m.min_step, "[master].min_step") if variable else (m.step, key)
     if not (math.isfinite(span) and span > 1e-13 * biggest):
         raise SceneError(scene.path, "[scene].stop_time", f"must exceed start_time = "

@@ -17,6 +17,7 @@ import io
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import cast
 
 from lxml import etree
 
@@ -82,8 +83,9 @@ def export_ssp(scene: Scene, path, fmu_dir=None) -> Path:
 
     path = Path(path)
     fmus = describe_fmus(scene, Path(fmu_dir) if fmu_dir else default_fmu_dir(scene))
-    check_components(scene, fmus)
-    check_links(scene, fmus)
+    loaded = cast(dict, fmus)  # a DescribedFmu offers what the checks read of an FmuInstance
+    check_components(scene, loaded)
+    check_links(scene, loaded)
     sources = resource_names(scene, fmus)
     ssd = ssd_document(scene, fmus, sources)
     write_archive(path, ssd, {sources[c]: fmus[c].path for c in scene.components})

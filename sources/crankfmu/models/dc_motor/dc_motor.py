@@ -71,8 +71,8 @@ class DcServoMotor(PhysicsModel):
                                  p.k_p if p.k_p <= 0 else p.k_i,
                                  "> 0 when effect speed_loop is on")
 
-    @property
-    def derivative_outputs_affine(self) -> bool:
+    @property  # read-only here: the answer follows the effects (runtime/model.py: a class flag)
+    def derivative_outputs_affine(self) -> bool:  # type: ignore[override]
         """With the lag the torque is the state M; without it, the clipped static law."""
         return self.on("electrical_lag")
 

@@ -1,5 +1,5 @@
 """Cold pipe rolling mill stand drive: twin crank-slider with assembly preload, pin friction and
-rolling load (seed mill_stand_drive_structure; MODELS.md section 5).
+rolling load (seed mill_stand_drive_structure).
 Kinematics, reduced dynamics, preload, friction, variables and tests: README.md in this folder.
 """
 from __future__ import annotations

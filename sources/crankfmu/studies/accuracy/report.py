@@ -7,32 +7,47 @@ from pathlib import Path
 
 from .sweep import Outcome
 
-# taylor last: the columns before it keep the places they had before it existed
-COLUMNS = ("algorithm", "extrapolation", "step_s", "fmu_tolerance", "tolerance", "error",
-           "estimated_error", "wall_s", "doStep_calls", "rollbacks", "communication_steps",
-           "status", "taylor")
+# accuracy.csv's columns and their units (accuracy.json: "units"; None: text); taylor last:
+# the columns before it keep the places they had before it existed
+UNITS = {"metric": None, "algorithm": None, "extrapolation": "1", "step": "s",
+         "fmu_tolerance": "1", "tolerance": "1", "error": "1", "estimated_error": "1",
+         "wall_time": "s", "doStep_calls": "1", "rollbacks": "1", "communication_steps": "1",
+         "status": None, "taylor": "1"}
+COLUMNS = tuple(UNITS)
 
 
-def _row(o: Outcome) -> list:
+def table_row(o: Outcome, metric: str) -> dict:
+    """A run's row of accuracy.csv (and of AccuracyResult.to_pandas): column -> value; an error
+    that is no number ("unstable", "events differ": the figure or the reason is in the status)
+    is that word, an estimate that is none is empty."""
     s = o.setting
-    # no number for these: the figure or the reason is in the status
     error = "unstable" if o.unstable else "events differ" if o.events_differ else o.error
     estimate = o.extra.get("estimated_error")  # cosim.estimate: empty when there is none
-    return [s.algorithm, s.extrapolation, s.step, s.fmu_tolerance, s.tolerance, error,
-            "" if estimate is None else estimate, o.wall_seconds, o.do_steps, o.rollbacks,
-            o.communication_steps, o.status, s.taylor]
+    return dict(zip(COLUMNS, [metric, s.algorithm, s.extrapolation, s.step, s.fmu_tolerance,
+                              s.tolerance, error, "" if estimate is None else estimate,
+                              o.wall_seconds, o.do_steps, o.rollbacks, o.communication_steps,
+                              o.status, s.taylor]))
 
 
-def write_table_csv(path: Path, outcomes: list[Outcome], metric: str) -> None:
-    """accuracy.csv, written through crankfmu.outputs.atomic_write."""
+def write_table_csv(path: Path, outcomes: list[Outcome], metric) -> Path:
+    """accuracy.csv and its sidecar accuracy.json (the metric, the units of the columns),
+    written through crankfmu.outputs.atomic_write; returns the sidecar's path."""
+    import json
+
     from ...outputs import atomic_write
 
     def write(f) -> None:
         w = csv.writer(f)
-        w.writerow(["metric"] + list(COLUMNS))
+        w.writerow(COLUMNS)
         for o in outcomes:
-            w.writerow([metric] + _row(o))
+            w.writerow(table_row(o, metric.name).values())
     atomic_write(path, write)
+    sidecar = Path(path).with_suffix(".json")
+    text = json.dumps({"csv": Path(path).name, "metric": metric.name,
+                       "metric_description": metric.describe(), "units": UNITS},
+                      indent=2) + "\n"
+    atomic_write(sidecar, lambda f: f.write(text))
+    return sidecar
 
 
 TABLE_HEAD = (f"{'algorithm':<13} {'ex':>3} {'step [s]':>9} {'fmu tol':>7} {'tol':>7} "

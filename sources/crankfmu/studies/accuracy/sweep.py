@@ -1,9 +1,9 @@
 """The accuracy sweep: master algorithm x extrapolation x communication step (x FMU tolerance),
 each run compared with the monolithic reference (computed once, cached in the output folder).
 
-Fixed-step masters are swept over the communication step; a variable-step master (the one named
-`adaptive`, or any master class with `variable_step = True`) is swept over its tolerance instead,
-with the scene's step as its initial step.
+Fixed-step masters are swept over the communication step; a variable-step master
+(crankfmu.masters.traits: knob "tolerance") is swept over its tolerance instead, with the scene's
+step as its initial step; a monolithic master (knob None) runs once, at the scene's step.
 
 Each run's outcome is computed (and `report`ed, e.g. printed) as the run finishes, and kept as
 runs/<label>.outcome.json beside its CSV with a key of everything it depends on (physics,
@@ -28,8 +28,9 @@ from pathlib import Path
 import numpy as np
 
 from ...cosim.results import versions
+from ...masters import traits
 from ...outputs import atomic_write
-from ...reference import record_times, solve_reference, write_reference
+from ...monolithic import record_times, solve_reference, write_reference
 from ...cosim.metrics import Metric, MetricError, ReferenceSamples, observed_order
 
 FLOOR_FACTOR = 10.0  # errors below 10 x the FMUs' tolerance are not coupling errors
@@ -104,29 +105,16 @@ class Outcome:
         return self.setting.step if self.knob == "step" else self.setting.tolerance
 
 
-def is_variable_step(algorithm: str) -> bool:
-    from ...masters import MASTERS
-    cls = MASTERS.get(algorithm)
-    return algorithm == "adaptive" or bool(getattr(cls, "variable_step", False))
-
-
-def is_monolithic(algorithm: str) -> bool:
-    """A master that integrates the FMUs' Model Exchange interfaces as one ODE (model-exchange):
-    it has no communication step or extrapolation to sweep, so the sweep runs it once, at the
-    scene's step (its record grid), as the row the co-simulation masters are set against."""
-    from ...fmu.instance3 import CO_SIMULATION
-    from ...system.wiring import master_interface
-    return master_interface(algorithm) != CO_SIMULATION
-
-
 def settings_for(scene, algorithms, extrapolations, steps, fmu_tolerances,
                  tolerances, taylors=()) -> list[Setting]:
-    """Every algorithm x coupling (each extrapolation, then each Taylor order for a master that
-    declares the option) x FMU tolerance x step (or tolerance of a variable-step master)."""
+    """The grid: a monolithic master once, at the scene's step (its record grid: the row the
+    co-simulation masters are set against); for every other master each coupling (each
+    extrapolation, then each Taylor order if the master declares the option) x FMU tolerance x
+    tolerance (a variable-step master) or step (a fixed-step one)."""
     from ...masters import MASTERS
     out = []
     for alg in algorithms:
-        if is_monolithic(alg):
+        if traits(alg).monolithic:
             out.append(Setting(alg, 0, scene.master.step, fmu_tolerances[0],
                                scene.master.tolerance))
             continue
@@ -135,7 +123,7 @@ def settings_for(scene, algorithms, extrapolations, steps, fmu_tolerances,
             [(0, q) for q in taylors if "taylor" in declared]
         for ex, q in couplings:
             for ft in fmu_tolerances:
-                if is_variable_step(alg):
+                if traits(alg).variable_step:
                     out += [Setting(alg, ex, scene.master.step, ft, tol, q) for tol in tolerances]
                 else:
                     out += [Setting(alg, ex, h, ft, scene.master.tolerance, q) for h in steps]
@@ -235,7 +223,7 @@ def trial_scene(scene, setting: Setting):
 
 def run_one(scene, setting: Setting, metric: Metric, ref: ReferenceSamples, fmu_dir,
             runs_dir: Path, executor=None) -> Outcome:
-    """One setting, run on `executor` (default: a pool of one worker process)."""
+    """One setting, run on `executor` (default: in this process)."""
     return run_settings(scene, [setting], metric, ref, fmu_dir, runs_dir, executor,
                         progress=False)[0]
 
@@ -243,12 +231,12 @@ def run_one(scene, setting: Setting, metric: Metric, ref: ReferenceSamples, fmu_
 def run_settings(scene, settings: list[Setting], metric: Metric, ref: ReferenceSamples, fmu_dir,
                  runs_dir: Path, executor=None, progress=False, label: str = "runs",
                  report=None, resume_key: str | None = None) -> list[Outcome]:
-    """Every setting as one run on `executor` (default: a pool of one worker process, runs one
-    after another); this process writes the runs' CSVs, sidecars and outcomes into runs_dir
+    """Every setting as one run on `executor` (default: in this process, one after another);
+    this process writes the runs' CSVs, sidecars and outcomes into runs_dir
     and calls report(outcome) as each run finishes. With `resume_key`, settings whose outcome
     file in runs_dir carries the same key are taken from there, not run again. The outcomes
     do not depend on the executor (only wall times do)."""
-    from ..executor import LocalPoolExecutor, RunTask
+    from ..executor import RunTask, make_executor
 
     outcomes: list[Outcome | None] = [None] * len(settings)
     if resume_key is not None:
@@ -261,7 +249,7 @@ def run_settings(scene, settings: list[Setting], metric: Metric, ref: ReferenceS
     if not tasks:
         return outcomes
     own = executor is None
-    executor = executor or LocalPoolExecutor(1)
+    executor = executor or make_executor(1)
 
     def done(output) -> None:
         k = output.key
@@ -327,7 +315,7 @@ def _outcome(setting: Setting, output, task, metric: Metric, ref: ReferenceSampl
     from ...cosim.runner import RunError
     from ..executor import write_run_files
 
-    outcome = Outcome(setting, "tolerance" if is_variable_step(setting.algorithm) else "step")
+    outcome = Outcome(setting, traits(setting.algorithm).knob or "step")
     csv = runs_dir / f"{setting.label}.csv"
     fmu_paths = {c: paths.get(d) for c, (d, _) in task.fmus.items()}
     if output.sidecar:  # the run got as far as writing results (completed or stopped early)
@@ -384,7 +372,7 @@ def orders(outcomes: list[Outcome], floor_factor: float = FLOOR_FACTOR) -> dict:
         groups.setdefault((s.algorithm, s.coupling, s.fmu_tolerance), []).append(o)
     result = {}
     for key, group in groups.items():
-        if is_monolithic(key[0]):  # one run: no order to observe
+        if traits(key[0]).monolithic:  # one run: no order to observe
             continue
         ok = [o for o in group if o.ok]
         order, used = observed_order([o.knob_value for o in ok], [o.error for o in ok],
@@ -410,4 +398,4 @@ def _co_simulations_meeting(outcomes: list[Outcome], target: float) -> list[Outc
     """The co-simulation runs meeting the target (the monolithic row is what they are set
     against, not a setting to choose)."""
     return [o for o in outcomes if o.ok and o.error <= target
-            and not is_monolithic(o.setting.algorithm)]
+            and not traits(o.setting.algorithm).monolithic]
