@@ -109,7 +109,8 @@ def main(argv=None) -> int:
             if best is not None:
                 s = best["setting"]
                 knob = f"tol {s[4]:g}" if traits(s[0]).variable_step else f"h {s[2]:g}"
-                best_text = f"{s[0]} x{s[1]} {knob} ({best['error']:.1e})"
+                coupling = f"t{s[5]}" if len(s) > 5 and s[5] else f"x{s[1]}"
+                best_text = f"{s[0]} {coupling} {knob} ({best['error']:.1e})"
                 best_wall = timed_run(scene, s, fmu_dir)
             walls, found = [], None
             for jobs in jobs_list:  # the same runs and choice whatever jobs is (bit-identical)
@@ -130,9 +131,10 @@ def main(argv=None) -> int:
             m = result.metadata["master"]
             knob = f"tol {m['tolerance']:g}" if traits(m["algorithm"]).variable_step else \
                 f"h {m['step']:g}"
-            summed = sum(r[4] for r in report.runs)
+            summed = sum(r[-1] for r in report.runs)
+            coupling = f"t{m['taylor']}" if m.get("taylor") else f"x{m['extrapolation']}"
             lines.append(
-                f"| {scene.name} | {target:g} | {m['algorithm']} x{m['extrapolation']} {knob} | "
+                f"| {scene.name} | {target:g} | {m['algorithm']} {coupling} {knob} | "
                 f"{report.estimate.error:.1e} | {err:.1e}{' ' + why if why else ''} | "
                 f"{'yes' if err <= target else 'NO'} | {len(report.runs)} ({summed:.2f}) | "
                 f"{best_text} | {best_wall:.2f} | {timing} |")

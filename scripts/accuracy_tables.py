@@ -73,7 +73,7 @@ def setting_text(o) -> str:
         return "none of the runs"
     s = o.setting
     knob = f"tol {s.tolerance:g}" if o.knob == "tolerance" else f"h {s.step:g} s"
-    return (f"{s.algorithm}, extrapolation {s.extrapolation}, {knob}: error {o.error:.1e}, "
+    return (f"{s.algorithm}, {s.coupling}, {knob}: error {o.error:.1e}, "
             f"{o.wall_seconds:.2f} s, {o.do_steps} doSteps")
 
 
@@ -90,12 +90,12 @@ def section(scene, result, best, wall: float) -> str:
              "",
              "| | cheapest setting (wall time) |", "|---|---|"]
     lines += [f"| error <= {t:g} | {setting_text(o)} |" for t, o in zip(TARGETS, best)]
-    lines += ["", "| master | extrapolation | observed order | unstable (error > 1 or stopped); "
+    lines += ["", "| master | coupling | observed order | unstable (error > 1 or stopped); "
               "event count differs from the reference |",
               "|---|---|---|---|"]
-    for (alg, ex, _ft), (order, used, knob) in result.orders.items():
+    for (alg, coupling, _ft), (order, used, knob) in result.orders.items():
         group = [o for o in result.outcomes
-                 if (o.setting.algorithm, o.setting.extrapolation) == (alg, ex)]
+                 if (o.setting.algorithm, o.setting.coupling) == (alg, coupling)]
         bad = sorted(o.knob_value for o in group if o.unstable)
         order_text = f"{order:.2f} (vs {knob}, {used} pts)" if math.isfinite(order) else \
             f"n/a ({used} pts above the floor)"
@@ -107,7 +107,7 @@ def section(scene, result, best, wall: float) -> str:
                  if not o.ok and not o.unstable and not o.events_differ]
         if other:
             where += f" (other: {', '.join(sorted(set(other)))})"
-        lines.append(f"| {alg} | {ex} | {order_text} | {where} |")
+        lines.append(f"| {alg} | {coupling} | {order_text} | {where} |")
     if result.metric.name == "events":
         lines += ["", event_order_table(result)]
     return "\n".join(lines)
@@ -123,17 +123,17 @@ def event_order_table(result) -> str:
     from crankfmu.studies.accuracy import observed_order
 
     labels = [s.label for s in result.metric.events]
-    lines = ["| master | extrapolation | " + " | ".join(f"order of {lb}" for lb in labels) + " |",
+    lines = ["| master | coupling | " + " | ".join(f"order of {lb}" for lb in labels) + " |",
              "|---|---|" + "---|" * len(labels)]
-    for alg, ex, _ft in result.orders:
+    for alg, coupling, _ft in result.orders:
         group = [o for o in result.outcomes if o.ok and o.extra.get("events")
-                 and (o.setting.algorithm, o.setting.extrapolation) == (alg, ex)]
+                 and (o.setting.algorithm, o.setting.coupling) == (alg, coupling)]
         cells = []
         for label in labels:
             order, used = observed_order([o.knob_value for o in group],
                                          [o.extra["events"][label] for o in group], EVENT_FLOOR)
             cells.append(f"{order:.2f}" if math.isfinite(order) else "n/a")
-        lines.append(f"| {alg} | {ex} | " + " | ".join(cells) + " |")
+        lines.append(f"| {alg} | {coupling} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 

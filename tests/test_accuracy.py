@@ -59,12 +59,16 @@ def test_cheapest_setting_meets_the_target_at_least_wall_time():
     assert cheapest(tie, 1e-3).setting.algorithm == "b"
 
 
-def test_orders_group_by_master_and_extrapolation():
+def test_orders_group_by_master_and_coupling():
+    """One order per master, coupling (extrapolation p or Taylor order q) and FMU tolerance."""
     runs = [outcome("jacobi", h, 5.0 * h, 1.0, 1) for h in (4e-3, 2e-3, 1e-3)] + \
-           [outcome("gauss-seidel", h, 7.0 * h ** 2, 1.0, 1) for h in (4e-3, 2e-3, 1e-3)]
+           [outcome("gauss-seidel", h, 7.0 * h ** 2, 1.0, 1) for h in (4e-3, 2e-3, 1e-3)] + \
+           [Outcome(Setting("gauss-seidel", 0, h, 1e-8, 1e-6, taylor=3), "step", 3e6 * h ** 4,
+                    1.0, 1) for h in (4e-3, 2e-3, 1e-3)]
     got = orders(runs, floor_factor=10.0)  # floor 1e-7: every error is above it
-    assert got[("jacobi", 0, 1e-8)][0] == pytest.approx(1.0)
-    assert got[("gauss-seidel", 0, 1e-8)][0] == pytest.approx(2.0)
+    assert got[("jacobi", "extrapolation 0", 1e-8)][0] == pytest.approx(1.0)
+    assert got[("gauss-seidel", "extrapolation 0", 1e-8)][0] == pytest.approx(2.0)
+    assert got[("gauss-seidel", "taylor 3", 1e-8)][0] == pytest.approx(4.0)
 
 
 def synthetic_run(time_scale=1.0, n=20001, t_end=2.0):

@@ -265,7 +265,8 @@ def test_cli_run_prints_coupling_error(tmp_path, rotor_fmus, capsys):
                  "--no-progress"])
     out = capsys.readouterr().out
     assert code == 0
-    assert "with adaptive (extrapolation 1, tolerance 0.001, min_step 1e-06, max_step 0.01)" \
+    assert "with adaptive (extrapolation 1, taylor 0, tolerance 0.001, min_step 1e-06, max_step "\
+           "0.01)" \
         in out and "accepted_steps" in out
     assert "coupling error at r2 -> r1: energy mismatch" in out
 

@@ -1,7 +1,8 @@
 """`crankfmu accuracy SCENE.toml`: what accuracy costs in wall time, per master setting.
 
-Sweeps algorithm x extrapolation x communication step (x FMU tolerance), compares every run with
-the monolithic reference (solved once, cached in --out DIR), and prints a table (once, when the
+Sweeps algorithm x coupling (extrapolation, or a Taylor coupling's order where the FMUs offer
+output derivatives) x communication step (x FMU tolerance), compares every run with the
+monolithic reference (solved once, cached in --out DIR), and prints a table (once, when the
 runs and their error estimates are done; a progress bar over the runs on stderr until then; a
 Python warning of a run as one line there), the observed convergence orders and, with
 --meet TOL, the cheapest setting whose error is at most TOL; writes accuracy.csv with its
@@ -31,7 +32,8 @@ def _names(text: str) -> list[str]:
 
 
 def register(sub) -> None:
-    from ..studies.accuracy import DEFAULT_STEP_FACTORS, DEFAULT_TOLERANCES, METRICS
+    from ..studies.accuracy import (DEFAULT_STEP_FACTORS, DEFAULT_TAYLORS, DEFAULT_TOLERANCES,
+                                    METRICS)
 
     p = sub.add_parser("accuracy", help="error vs wall time of master settings against the "
                                         "monolithic reference (work-precision)")
@@ -46,6 +48,11 @@ def register(sub) -> None:
                    help="masters, a comma list (default: every available master)")
     p.add_argument("--extrapolations", type=_ints, metavar="ORDERS",
                    help="comma list of 0, 1, 2 (default all)")
+    p.add_argument("--taylors", type=_ints, metavar="ORDERS",
+                   help="Taylor coupling orders ([master].taylor) for the masters that take it, "
+                        "comma list of 1 .. 4, 0 for none (default without --algorithms: "
+                        + ",".join(map(str, DEFAULT_TAYLORS)) + " where every FMU with "
+                        "connected outputs offers their derivatives; else none)")
     p.add_argument("--steps", type=_floats, metavar="S,...",
                    help="communication steps [s], comma list (default: the scene's step x "
                         + ", ".join(f"{f:g}" for f in DEFAULT_STEP_FACTORS) + ")")
@@ -99,6 +106,7 @@ def run_accuracy_command(args) -> int:
         out_dir=args.out or Path("results") / f"{scene.name}_accuracy",
         algorithms=args.algorithms,
         extrapolations=args.extrapolations or [0, 1, 2],
+        taylors=None if args.taylors is None else [q for q in args.taylors if q],
         steps=args.steps,
         fmu_tolerances=args.fmu_tolerances, metric=args.metric, variables=args.variables,
         cycles=args.cycles, meet=args.meet, reference_rtol=args.rtol, plot=args.plot,
@@ -149,6 +157,8 @@ def _check_options(o) -> None:
                           f"{', '.join(MASTERS)}")
     if any(x not in (0, 1, 2) for x in o.extrapolations):
         raise OptionError(f"--extrapolations: {o.extrapolations}: each must be 0, 1 or 2")
+    if any(q not in (1, 2, 3, 4) for q in o.taylors or []):
+        raise OptionError(f"--taylors: {o.taylors}: each must be 0 (none), 1, 2, 3 or 4")
     for name, values in (("--steps", o.steps), ("--tolerances", o.tolerances),
                          ("--fmu-tolerances", o.fmu_tolerances),
                          ("--meet", [o.meet] if o.meet is not None else []),
@@ -164,7 +174,8 @@ def _print_choice(what: str, o, meet: float) -> None:
         print(f"{what} meeting --meet {meet:g}: none of the runs")
         return
     s = o.setting
-    print(f"{what} meeting --meet {meet:g}: --algorithm {s.algorithm} --extrapolation "
-          f"{s.extrapolation} --step {s.step:g} --fmu-tolerance {s.fmu_tolerance:g}"
+    coupling = f"--taylor {s.taylor}" if s.taylor else f"--extrapolation {s.extrapolation}"
+    print(f"{what} meeting --meet {meet:g}: --algorithm {s.algorithm} {coupling} "
+          f"--step {s.step:g} --fmu-tolerance {s.fmu_tolerance:g}"
           + (f" --tolerance {s.tolerance:g}" if o.knob == "tolerance" else "")
           + f" (error {o.error:.2e}, {o.wall_seconds:.2f} s, {o.do_steps} doStep calls)")

@@ -1,7 +1,7 @@
 """`crankfmu run SCENE [--out DIR] [--plot]`: co-simulate a scene with its master; the CSV, its
 JSON sidecar (with the error estimate) and with --plot a PNG, into DIR (crankfmu.cosim.runner).
-With --target TOL the master, extrapolation and step are chosen from the error estimate
-(crankfmu.cosim.target)."""
+With --target TOL the master, the coupling (extrapolation or Taylor order) and the step are
+chosen from the error estimate (crankfmu.cosim.target)."""
 from __future__ import annotations
 
 import sys
@@ -73,8 +73,10 @@ def _run_target(scene, out: Path, args, jobs: int) -> int:
     m = result.metadata["master"]
     knob = f"tolerance {report.tolerance:g}" if m["step"] != report.step or \
         traits(m["algorithm"]).variable_step else f"step {m['step']:g} s"
-    print(f"{scene.name}: target {report.target:g} met by {m['algorithm']}, extrapolation "
-          f"{m.get('extrapolation')}, {knob}; the search ran {len(report.runs)} runs in "
+    coupling = f"taylor {m['taylor']}" if m.get("taylor") else \
+        f"extrapolation {m.get('extrapolation')}"
+    print(f"{scene.name}: target {report.target:g} met by {m['algorithm']}, {coupling}, "
+          f"{knob}; the search ran {len(report.runs)} runs in "
           f"{report.wall_seconds:.2f} s wall")
     _print_run(scene, result, report.estimate)
     return 0

@@ -8,8 +8,9 @@ difference between the run and its companion is d = |e(r x) - e(x)| ~ |r^p - 1| 
 
     estimate = d / |r^p - 1|.
 
-`crankfmu run`: one finer companion, at h/2 (fixed step, p = p0 = extrapolation + 1: the
-estimate is d 2^p / (2^p - 1), between 1.07 d and 2 d whatever p is) or at a tenth of a
+`crankfmu run`: one finer companion, at h/2 (fixed step, p = p0 = extrapolation + 1, or
+taylor + 1 for a Taylor coupling: the estimate is d 2^p / (2^p - 1), between 1.03 d and 2 d
+whatever p is) or at a tenth of a
 variable-step master's tolerance (p = 1: about 1.1 d). The finer run is nearer the asymptotic
 range than the run, so d measures the run's own error; coarse companions (2h and 4h, the order
 observed from the three runs) were cheaper but off more often: scripts/error_estimate.py
@@ -75,23 +76,24 @@ class Estimate:
                 "companion_seconds": self.companion_seconds, "reason": self.reason}
 
 
-def order_rule(algorithm: str, extrapolation: int) -> tuple[float, tuple | None]:
+def order_rule(algorithm: str, extrapolation: int, taylor: int = 0
+               ) -> tuple[float, tuple | None]:
     """(order, bounds of an observed order) of `crankfmu run`'s estimator: one companion, so
     the order is the master's design order p0 (crankfmu.masters.Traits.design_order:
-    extrapolation + 1 at a fixed step, 1 at a variable step). ValueError for a monolithic
-    master: it has no coupling error to estimate."""
+    extrapolation + 1 at a fixed step, taylor + 1 with a Taylor coupling, 1 at a variable
+    step). ValueError for a monolithic master: it has no coupling error to estimate."""
     from ..masters import traits
-    order = traits(algorithm).design_order(extrapolation)
+    order = traits(algorithm).design_order(extrapolation, taylor)
     if order is None:
         raise ValueError(f"{algorithm} has no coupling error, so no design order")
     return order, None
 
 
-def coarse_bounds(algorithm: str, extrapolation: int) -> tuple[float, float]:
+def coarse_bounds(algorithm: str, extrapolation: int, taylor: int = 0) -> tuple[float, float]:
     """Bounds of the order observed from companions at 2h and 4h (the --target search):
     [p0, p0 + 1] (Gauss-Seidel and the iterative master gain an order on some scenes; outside
     that range the observed ratio was noise: scripts/error_estimate.py)."""
-    p0, _ = order_rule(algorithm, extrapolation)
+    p0, _ = order_rule(algorithm, extrapolation, taylor)
     return p0, p0 + 1.0
 
 

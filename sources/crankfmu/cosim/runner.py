@@ -453,7 +453,8 @@ def estimate_run(scene, run_series: tuple, fmu_dir=None, pending: list | None = 
                             reason=f"the companion run at {knob} {value:g} stopped: "
                                    f"{run.reason}")
         series.append(run.series)
-    est = richardson(metric, series, ratio, knob, *order_rule(m.algorithm, m.extrapolation))
+    est = richardson(metric, series, ratio, knob,
+                     *order_rule(m.algorithm, m.extrapolation, m.taylor))
     est.companion_seconds = seconds
     if est.ok and est.error < FLOOR_FACTOR * m.fmu_tolerance:  # say it: no number hides it
         est.reason = "; ".join(filter(None, [est.reason, (

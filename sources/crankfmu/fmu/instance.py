@@ -183,18 +183,21 @@ class FmuInstance:
         stats.do_step_calls += 1
 
     # -- state rollback (raw ctypes, as fmpy's getFMUstate, with its status check) ---------
+    # the functions get, set, free (Fmu3Instance: FMI 3.0's, same arguments)
+    state_functions = ("fmi2GetFMUstate", "fmi2SetFMUstate", "fmi2FreeFMUstate")
+
     def get_state(self):
         self.stats.state_saves += 1
-        state = fmi2FMUstate()
-        self._state_call("fmi2GetFMUstate", ctypes.byref(state))
+        state = fmi2FMUstate()  # a void pointer, as fmi3FMUState
+        self._state_call(self.state_functions[0], ctypes.byref(state))
         return state
 
     def set_state(self, state) -> None:
         self.stats.rollbacks += 1
-        self._state_call("fmi2SetFMUstate", state)
+        self._state_call(self.state_functions[1], state)
 
     def free_state(self, state) -> None:
-        self._state_call("fmi2FreeFMUstate", ctypes.byref(state))
+        self._state_call(self.state_functions[2], ctypes.byref(state))
 
     def _state_call(self, function: str, state) -> None:
         status = self.slave._functions[function](self._component, state)

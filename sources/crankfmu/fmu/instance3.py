@@ -60,6 +60,7 @@ class Fmu3Instance(FmuInstance):
     fmpy's FMU3Slave or FMU3Model."""
 
     fmi_version = 3
+    state_functions = ("fmi3GetFMUState", "fmi3SetFMUState", "fmi3FreeFMUState")
 
     def __init__(self, name: str, path: Path, log=None, interface: str = CO_SIMULATION):
         self.name, self.path, self.interface = name, Path(path), interface

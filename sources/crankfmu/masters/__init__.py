@@ -67,14 +67,18 @@ class Traits:
             return None
         return "tolerance" if self.variable_step else "step"
 
-    def design_order(self, extrapolation: int) -> float | None:
+    def design_order(self, extrapolation: int, taylor: int = 0) -> float | None:
         """The order p of its global error in its knob, e ~ C knob^p, that the error estimate
         assumes: extrapolation + 1 for a fixed-step master (inputs extrapolated with order
-        p - 1), 1 for a variable-step one (the tolerance bounds each step's input error, so the
-        global error follows it at every extrapolation), None without a coupling error."""
+        p - 1), taylor + 1 with a Taylor coupling of order q = taylor ([master].taylor,
+        masters/taylor.py; measured on the two-mass oscillator: tests/test_taylor_coupling.py),
+        1 for a variable-step one (the tolerance bounds each step's input error, so the global
+        error follows it whatever the coupling), None without a coupling error."""
         if self.monolithic:
             return None
-        return 1.0 if self.variable_step else float(extrapolation + 1)
+        if self.variable_step:
+            return 1.0
+        return float(taylor + 1 if taylor else extrapolation + 1)
 
     def describe_steps(self, step: float) -> str:
         """How it steps, for a summary line: "variable steps" or "steps of 0.001 s"."""

@@ -35,7 +35,7 @@ import warnings
 
 from .base import Master, evaluate
 from .inputs import edge_reading_time, step_edges, step_to
-from .options import EXTRAPOLATION, TOLERANCE, Option, OptionError
+from .options import EXTRAPOLATION, TAYLOR, TOLERANCE, Option, OptionError
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 5.0
 MIN_STEP = Option("min_step", float, "s", 1e-6, "the smallest step a variable-step master "
@@ -49,7 +49,7 @@ DEFAULT_TOLERANCE = 1e-2  # the module's docstring: a step error reachable at ev
 
 class Adaptive(Master):
     name = "adaptive"
-    options = (EXTRAPOLATION, TOLERANCE, MIN_STEP, MAX_STEP)
+    options = (EXTRAPOLATION, TAYLOR, TOLERANCE, MIN_STEP, MAX_STEP)
     defaults = {"tolerance": DEFAULT_TOLERANCE}
     needs_rollback = True
     variable_step = True
@@ -87,7 +87,8 @@ class Adaptive(Master):
 
     def _step(self, t: float, h: float) -> float:
         h = self._to_edge(t, h)
-        order = min(self.extrapolation, len(self.history.times) - 1)
+        order = min(self.extrapolation, len(self.history.times) - 1) if self.taylor is None \
+            else self.taylor.order  # the error of order `order` + 1 in h
         states = self.save_states()
         coefficients = self.source_coefficients(t, order)
         rows = {c: coefficients[c] for c in self.system.order}  # the same rows as the sweep's

@@ -41,6 +41,9 @@ The base class composes parts that are each testable alone:
                                     midpoint value for a foreign FMU (with one warning)
     rollback.Rollback               get/set/free FMU states
     power.PortPower                 the port energies (the run's coupling-error figure)
+    taylor.TaylorCoupling           with [master].taylor = q: the output derivatives exchanged
+                                    at a communication point, the rows that replace
+                                    extrapolation
     scale.ErrorScale, check_finite  what tolerances are relative to; divergence
 and provides `initialize(t0)`, the public `step(t, h)` (calls `_step`, then keeps the
 communication-point history and the port energies), the two sweeps (`parallel_sweep`: Jacobi,
@@ -48,21 +51,23 @@ communication-point history and the port energies), the two sweeps (`parallel_sw
 advance functions made once at construction (the ones `gather` and `advance_component` call),
 not those methods: a master that needs other inputs overrides the sweep or writes its own.
 
-Inputs over a step are polynomials of degree <= 2, given as Taylor rows at the step start
-(value, first and second derivative): a list of rows, each a sequence of Python floats with one
-entry per signal. `system.outputs[comp]` is a list of floats, replaced (never changed in place)
-at every read, so the history keeps it as it is. A component has a few connected values: on
-those, Python floats cost less than numpy's per-call overhead, with the same operations and so
-the same floats (scripts/masters_identity.py).
+Inputs over a step are polynomials of degree <= 2 (extrapolation), or up to 5 (a Taylor
+coupling, masters/taylor.py), given as Taylor rows at the step start (value, first, second ...
+derivative): a list of rows, each a sequence of Python floats with one entry per signal.
+`system.outputs[comp]` is a list of floats, replaced (never changed in place) at every read, so
+the history keeps it as it is. A component has a few connected values: on those, Python floats
+cost less than numpy's per-call overhead, with the same operations and so the same floats
+(scripts/masters_identity.py).
 """
 from __future__ import annotations
 
 from .history import HISTORY_DEPTH, Coefficients, History, evaluate, taylor_rows
 from .inputs import InputFeed
-from .options import Option, OptionError
+from .options import Option, OptionError, check_coupling
 from .power import PortPower
 from .rollback import Rollback
 from .scale import RUNAWAY_LIMIT, DivergenceError, ErrorScale, check_finite
+from .taylor import TaylorCoupling
 
 __all__ = ["Coefficients", "DivergenceError", "HISTORY_DEPTH", "History", "Master",
            "RUNAWAY_LIMIT", "evaluate", "taylor_rows"]
@@ -85,6 +90,8 @@ class Master:
         self.settings = settings
         self.values = self.read_options(settings)
         self.extrapolation = self.values.get("extrapolation", 0)
+        taylor = self.values.get("taylor", 0)  # masters/taylor.py: its rows replace extrapolation
+        self.taylor = TaylorCoupling(system, taylor, self.name) if taylor else None
         self.rollback = Rollback(system, self.name, self.needs_rollback)
         self.can_rollback = self.rollback.available
         self.history = History()
@@ -112,6 +119,7 @@ class Master:
                                                            cls.default(option)))
             except OptionError as err:
                 raise OptionError(f"[master].{option.name}: {err}") from None
+        check_coupling(values)
         cls.check_options(values)
         return values
 
@@ -188,7 +196,10 @@ class Master:
                             ) -> Coefficients:
         """Taylor rows at t of every component's connected outputs (extrapolation of `order`
         from the history; a component in `newest` (comp -> (t_new, values)) contributes that
-        point too), computed when first read."""
+        point too), computed when first read. With a Taylor coupling: the Taylor rows
+        exchanged at t (masters/taylor.py), whatever the order."""
+        if self.taylor is not None and newest is None:
+            return self.taylor.coefficients(t)
         return Coefficients(self.history, t, order, newest)
 
     def gather(self, comp: str, coefficients: dict) -> list:
@@ -219,7 +230,10 @@ class Master:
 
     # -- the two sweeps -------------------------------------------------------------------
     def parallel_sweep(self, t: float, h: float, order: int) -> None:
-        """Jacobi: every component steps from t with inputs extrapolated from the history."""
+        """Jacobi: every component steps from t with inputs extrapolated from the history (or
+        the Taylor coupling's rows)."""
+        if self.taylor is not None:
+            return self.taylor.sweep(self, t, h, sequential=False)
         coefficients = Coefficients(self.history, t, order)
         plan = self._sweep_plan
         for _, gather, advance, _ in plan:
@@ -233,6 +247,8 @@ class Master:
         """Gauss-Seidel: components step in order; a source that already reached t + h
         contributes that newest point (interpolation), the others are extrapolated.
         `start_rows`: the extrapolation rows already computed (comp -> rows), reused."""
+        if self.taylor is not None:  # its rows at t are kept: start_rows are those
+            return self.taylor.sweep(self, t, h, sequential=True)
         coefficients = Coefficients(self.history, t, order)
         if start_rows:
             coefficients.update(start_rows)
@@ -273,7 +289,9 @@ class Master:
         return {name: fmu.stats.as_dict() for name, fmu in self.system.fmus.items()}
 
     def master_statistics(self) -> dict:
-        return {"algorithm": self.name, "extrapolation": self.extrapolation,
+        taylor = {} if self.taylor is None else {"taylor": self.taylor.order,
+                                                 "exchange_rounds": self.taylor.rounds}
+        return {"algorithm": self.name, "extrapolation": self.extrapolation, **taylor,
                 **self.extra_statistics}
 
     def coupling_error(self) -> dict:

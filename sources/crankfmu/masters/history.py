@@ -65,7 +65,11 @@ def evaluate(rows, s: float) -> list[float]:
     if len(rows) == 2:
         return [a + b * s for a, b in zip(rows[0], rows[1])]
     c = 0.5 * s * s
-    return [a + b * s + d * c for a, b, d in zip(rows[0], rows[1], rows[2])]
+    out = [a + b * s + d * c for a, b, d in zip(rows[0], rows[1], rows[2])]
+    for k in range(3, len(rows)):  # a Taylor coupling's higher rows
+        c *= s / k
+        out = [a + d * c for a, d in zip(out, rows[k])]
+    return out
 
 
 class History:

@@ -97,4 +97,8 @@ def _ends(seen: dict, comp: str, index: int) -> tuple[float, float]:
         end += rows[1][index] * h
     if len(rows) > 2:
         end += rows[2][index] * (0.5 * h * h)
+    term = 0.5 * h * h
+    for k in range(3, len(rows)):  # a Taylor coupling's higher rows
+        term *= h / k
+        end += rows[k][index] * term
     return start, end

@@ -30,6 +30,9 @@ DEFAULT_TOLERANCES = (1e-2, 1e-3, 1e-4)              # a variable-step master's 
 # (servo press, 1 s, tolerance 1e-4: 150,000 doStep calls and 38 s, against 802 calls with
 # extrapolation 2). Asked for explicitly (--algorithms adaptive --extrapolations 0) it runs.
 DEFAULT_GRID_EXCLUDES = {("variable-step", 0)}
+# Taylor couplings in the default grid, for the masters that take [master].taylor, on scenes
+# whose FMUs offer the output derivatives (cosim/coupling.py)
+DEFAULT_TAYLORS = (2, 3, 4)
 
 
 @dataclass
@@ -37,6 +40,8 @@ class AccuracyOptions:
     out_dir: Path
     algorithms: list[str] | None = None        # default: every master in MASTERS
     extrapolations: list[int] = field(default_factory=lambda: [0, 1, 2])
+    taylors: list[int] | None = None           # default: with algorithms None (the default
+                                               # grid), the DEFAULT_TAYLORS the FMUs offer
     steps: list[float] | None = None           # default: DEFAULT_STEP_FACTORS x scene step
     tolerances: list[float] = field(default_factory=lambda: list(DEFAULT_TOLERANCES))
     fmu_tolerances: list[float] | None = None  # default: the scene's
@@ -107,10 +112,15 @@ def run_accuracy(scene, options: AccuracyOptions) -> AccuracyResult:
         scene = copy.deepcopy(scene)
         scene.record = list(dict.fromkeys(scene.record + [v for s in specs for v in s.needs]))
     metric = make_metric(name, scene.record, options.variables, options.cycles, specs)
+    taylors = options.taylors
+    if taylors is None:  # the default grid (every master) has those the FMUs offer
+        from ...cosim.coupling import taylor_orders_offered
+        taylors = [] if options.algorithms is not None else \
+            taylor_orders_offered(scene, options.fmu_dir, DEFAULT_TAYLORS)
     settings = settings_for(
         scene, options.algorithms or list(MASTERS), options.extrapolations,
         options.steps or [f * scene.master.step for f in DEFAULT_STEP_FACTORS],
-        options.fmu_tolerances or [scene.master.fmu_tolerance], options.tolerances)
+        options.fmu_tolerances or [scene.master.fmu_tolerance], options.tolerances, taylors)
     if options.algorithms is None:
         settings = [s for s in settings if not _excluded_by_default(s)]
     from .estimates import add_estimates, extra_companions
@@ -198,11 +208,11 @@ def _rows_only(report, companions: set):
 def _excluded_by_default(setting: Setting) -> bool:
     from ...masters import traits
     kind = "variable-step" if traits(setting.algorithm).variable_step else setting.algorithm
-    return (kind, setting.extrapolation) in DEFAULT_GRID_EXCLUDES
+    return (kind, setting.extrapolation) in DEFAULT_GRID_EXCLUDES and not setting.taylor
 
 
-__all__ = ["AccuracyOptions", "AccuracyResult", "EventError", "EventSpec", "METRICS", "Metric",
-           "MetricError", "Outcome", "Setting", "UNSTABLE_ERROR", "cheapest", "event_error",
+__all__ = ["AccuracyOptions", "AccuracyResult", "DEFAULT_TAYLORS", "EventError", "EventSpec",
+           "METRICS", "Metric", "MetricError", "Outcome", "Setting", "UNSTABLE_ERROR", "cheapest", "event_error",
            "event_errors", "fewest_steps", "format_orders", "format_outcome", "format_table",
            "make_metric", "observed_order", "orders", "parse_event_specs", "run_accuracy",
            "scene_event_specs", "scene_metric_name", "steady_figures"]

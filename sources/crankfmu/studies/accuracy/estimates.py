@@ -63,7 +63,8 @@ def add_estimates(outcomes: list[Outcome], metric, runs_dir: Path) -> None:
             o.extra["estimate_reason"] = "a companion run stopped or is missing"
             continue
         knob, ratio, _ = companion_knobs(s.algorithm, s.step, s.tolerance)
-        est = richardson(metric, series, ratio, knob, *order_rule(s.algorithm, s.extrapolation))
+        est = richardson(metric, series, ratio, knob,
+                         *order_rule(s.algorithm, s.extrapolation, s.taylor))
         o.extra["estimated_error"] = est.error if est.ok else None
         if not est.ok:
             o.extra["estimate_reason"] = est.reason

@@ -45,11 +45,18 @@ class Setting:
     step: float           # s, communication step (initial step of a variable-step master)
     fmu_tolerance: float
     tolerance: float      # the iterative/adaptive masters' own tolerance
+    taylor: int = 0       # a Taylor coupling's order ([master].taylor; then extrapolation 0)
 
     @property
     def label(self) -> str:
-        return (f"{self.algorithm}_x{self.extrapolation}_h{self.step:g}_ft{self.fmu_tolerance:g}"
+        coupling = f"_t{self.taylor}" if self.taylor else f"_x{self.extrapolation}"
+        return (f"{self.algorithm}{coupling}_h{self.step:g}_ft{self.fmu_tolerance:g}"
                 f"_tol{self.tolerance:g}")
+
+    @property
+    def coupling(self) -> str:
+        """How the inputs over a step are made: "extrapolation p" or "taylor q"."""
+        return f"taylor {self.taylor}" if self.taylor else f"extrapolation {self.extrapolation}"
 
 
 @dataclass
@@ -78,7 +85,8 @@ class Outcome:
 
     def to_json(self) -> dict:
         s = self.setting
-        return {"setting": [s.algorithm, s.extrapolation, s.step, s.fmu_tolerance, s.tolerance],
+        return {"setting": [s.algorithm, s.extrapolation, s.step, s.fmu_tolerance, s.tolerance,
+                            s.taylor],
                 "knob": self.knob, "error": self.error if math.isfinite(self.error) else None,
                 "wall_seconds": self.wall_seconds, "do_steps": self.do_steps,
                 "rollbacks": self.rollbacks, "communication_steps": self.communication_steps,
@@ -98,22 +106,27 @@ class Outcome:
 
 
 def settings_for(scene, algorithms, extrapolations, steps, fmu_tolerances,
-                 tolerances) -> list[Setting]:
+                 tolerances, taylors=()) -> list[Setting]:
     """The grid: a monolithic master once, at the scene's step (its record grid: the row the
-    co-simulation masters are set against), a variable-step master over `tolerances`, a
-    fixed-step one over `steps`."""
+    co-simulation masters are set against); for every other master each coupling (each
+    extrapolation, then each Taylor order if the master declares the option) x FMU tolerance x
+    tolerance (a variable-step master) or step (a fixed-step one)."""
+    from ...masters import MASTERS
     out = []
     for alg in algorithms:
         if traits(alg).monolithic:
             out.append(Setting(alg, 0, scene.master.step, fmu_tolerances[0],
                                scene.master.tolerance))
             continue
-        for ex in extrapolations:
+        declared = {o.name for o in getattr(MASTERS.get(alg), "options", ())}
+        couplings = [(ex, 0) for ex in extrapolations] + \
+            [(0, q) for q in taylors if "taylor" in declared]
+        for ex, q in couplings:
             for ft in fmu_tolerances:
                 if traits(alg).variable_step:
-                    out += [Setting(alg, ex, scene.master.step, ft, tol) for tol in tolerances]
+                    out += [Setting(alg, ex, scene.master.step, ft, tol, q) for tol in tolerances]
                 else:
-                    out += [Setting(alg, ex, h, ft, scene.master.tolerance) for h in steps]
+                    out += [Setting(alg, ex, h, ft, scene.master.tolerance, q) for h in steps]
     return out
 
 
@@ -203,6 +216,8 @@ def trial_scene(scene, setting: Setting):
     m = trial.master
     m.algorithm, m.extrapolation, m.step = setting.algorithm, setting.extrapolation, setting.step
     m.fmu_tolerance, m.tolerance = setting.fmu_tolerance, setting.tolerance
+    if setting.taylor:
+        m.taylor = setting.taylor
     return trial
 
 
@@ -347,13 +362,14 @@ def _counts(statistics: dict) -> tuple[int, int]:
 
 # -- summaries -----------------------------------------------------------------------------------
 def orders(outcomes: list[Outcome], floor_factor: float = FLOOR_FACTOR) -> dict:
-    """Observed order per (algorithm, extrapolation, fmu_tolerance): slope of log error over log
-    step (log tolerance for a variable-step master) over the errors above floor_factor x the FMU
-    tolerance. Values: (order, points used, knob)."""
+    """Observed order per (algorithm, coupling, fmu_tolerance) (coupling: Setting.coupling,
+    "extrapolation p" or "taylor q"): slope of log error over log step (log tolerance for a
+    variable-step master) over the errors above floor_factor x the FMU tolerance. Values:
+    (order, points used, knob)."""
     groups: dict[tuple, list[Outcome]] = {}
     for o in outcomes:
         s = o.setting
-        groups.setdefault((s.algorithm, s.extrapolation, s.fmu_tolerance), []).append(o)
+        groups.setdefault((s.algorithm, s.coupling, s.fmu_tolerance), []).append(o)
     result = {}
     for key, group in groups.items():
         if traits(key[0]).monolithic:  # one run: no order to observe
