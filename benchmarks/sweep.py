@@ -65,8 +65,8 @@ def main() -> int:
                 times[jobs].append(time.perf_counter() - t)
                 cpus[jobs].append(cpu() - c)
         a, b = (tables[j] for j in args.jobs)
-        same = all({c: ra[c] for c in a.columns if c != "wall_seconds"}
-                   == {c: rb[c] for c in a.columns if c != "wall_seconds"}
+        same = all({c: ra[c] for c in a.columns if c != "wall_time"}
+                   == {c: rb[c] for c in a.columns if c != "wall_time"}
                    for ra, rb in zip(a.rows, b.rows))
         ok = sum(r["status"] == "completed" for r in a.rows)
         j1, j2 = args.jobs
