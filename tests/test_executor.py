@@ -9,6 +9,7 @@ import copy
 import json
 import math
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -121,6 +122,20 @@ def pid_and_worker_folder() -> tuple[int, str]:
     return os.getpid(), folder
 
 
+def run_pool_script(script: str, tmp: Path, start_method: str):
+    """Run `script` in a fresh interpreter from the project's root, its temporary folders in
+    `tmp`, its pools' workers started by `start_method`; it must succeed."""
+    import os
+    import subprocess
+
+    from tests.conftest import ROOT
+    done = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True,
+                          text=True, timeout=120, env={**os.environ, "TMPDIR": str(tmp),
+                                                       "CRANKFMU_START_METHOD": start_method})
+    assert done.returncode == 0, done.stderr[-3000:]
+    return done
+
+
 @pytest.mark.parametrize("start_method", ["fork", "spawn"])
 def test_workers_that_the_pool_ends_remove_their_folders(tmp_path, start_method):
     """When a worker dies (here SIGKILL), the pool ends the others with SIGTERM, whose default
@@ -154,10 +169,7 @@ def test_workers_that_the_pool_ends_remove_their_folders(tmp_path, start_method)
         "            break\n"
         "        time.sleep(0.05)\n"
         "print(workers[0][1])\n")
-    done = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True,
-                          text=True, timeout=120, env={**os.environ, "TMPDIR": str(tmp_path),
-                                                       "CRANKFMU_START_METHOD": start_method})
-    assert done.returncode == 0, done.stderr[-3000:]
+    done = run_pool_script(script, tmp_path, start_method)
     broken, killed = done.stdout.split()
     assert broken == "BrokenProcessPool"
     assert [str(p) for p in tmp_path.iterdir()] == [killed]
@@ -185,10 +197,7 @@ def test_workers_of_a_closed_pool_leave_no_folder_and_not_the_parents(tmp_path, 
         "pool.close()\n"
         "import os\n"
         "print(mine, os.path.isdir(mine), len({pid for pid, _ in workers}))\n")
-    done = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True,
-                          text=True, timeout=120, env={**os.environ, "TMPDIR": str(tmp_path),
-                                                       "CRANKFMU_START_METHOD": start_method})
-    assert done.returncode == 0, done.stderr[-3000:]
+    done = run_pool_script(script, tmp_path, start_method)
     mine, kept, workers = done.stdout.split()
     assert kept == "True" and workers == "2"  # the parent's folder outlived the pool
     # at the parent's exit its own folder goes too: nothing is left
