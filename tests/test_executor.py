@@ -141,11 +141,7 @@ def test_workers_that_the_pool_ends_remove_their_folders(tmp_path, start_method)
     """When a worker dies (here SIGKILL), the pool ends the others with SIGTERM, whose default
     action runs no exit handler: before, they left their temporary folders. Only the killed
     worker's folder may remain."""
-    import os
-    import subprocess
-    import sys
 
-    from tests.conftest import ROOT
     script = (
         "import os, signal\n"
         "from crankfmu.studies.executor import LocalPoolExecutor\n"
@@ -181,11 +177,7 @@ def test_workers_of_a_closed_pool_leave_no_folder_and_not_the_parents(tmp_path, 
     forked worker leaves its parent's alone. Before the start method was chosen, a forked
     worker would have left its folders (it exits without running atexit's handlers), or
     removed the parent's (it inherits the parent's record of its private folders)."""
-    import os
-    import subprocess
-    import sys
 
-    from tests.conftest import ROOT
     script = (
         "from crankfmu.studies.executor import LocalPoolExecutor, _worker_dir\n"
         "from crankfmu.fmu.archive import _new_private\n"
