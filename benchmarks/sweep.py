@@ -42,8 +42,10 @@ def main() -> int:
     scene = load_scene(scene_path)
     for name in scene.components:  # build once, outside the timing
         resolve_fmu(scene, name, ROOT / "fmus")
+    from crankfmu.studies.executor import start_method
     print(f"servo press, 12 runs of {args.stop_time:g} s, {os.cpu_count()} cores, "
-          f"load average {os.getloadavg()[0]:.2f} at start")
+          f"load average {os.getloadavg()[0]:.2f} at start; workers started by "
+          f"{start_method()} (CRANKFMU_START_METHOD=spawn or fork to choose)")
     import resource
 
     def cpu() -> float:
@@ -65,8 +67,8 @@ def main() -> int:
                 times[jobs].append(time.perf_counter() - t)
                 cpus[jobs].append(cpu() - c)
         a, b = (tables[j] for j in args.jobs)
-        same = all({c: ra[c] for c in a.columns if c != "wall_seconds"}
-                   == {c: rb[c] for c in a.columns if c != "wall_seconds"}
+        same = all({c: ra[c] for c in a.columns if c != "wall_time"}
+                   == {c: rb[c] for c in a.columns if c != "wall_time"}
                    for ra, rb in zip(a.rows, b.rows))
         ok = sum(r["status"] == "completed" for r in a.rows)
         j1, j2 = args.jobs

@@ -209,13 +209,14 @@ print("done:", len(table), "sweep runs,", len(acc.outcomes), "accuracy runs", fl
 """
 
 
-def _script(tmp_path, jobs: int, fmu_dir):
+def _script(tmp_path, jobs: int, fmu_dir, start_method: str = ""):
     import subprocess
 
     from tests.conftest import ROOT
     script = tmp_path / "study.py"
     script.write_text(NO_GUARD)
-    env = {**__import__("os").environ, "PYTHONPATH": str(ROOT / "sources")}
+    env = {**__import__("os").environ, "PYTHONPATH": str(ROOT / "sources"),
+           "CRANKFMU_START_METHOD": start_method}
     return subprocess.run([sys.executable, str(script), str(jobs), str(SERVO), str(fmu_dir)],
                           cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
 
@@ -230,11 +231,22 @@ def test_a_script_without_a_main_guard_runs_once_with_jobs_1(tmp_path, fmu_dir):
     assert "done: 2 sweep runs, 1 accuracy runs" in done.stdout
 
 
-def test_a_pool_from_a_script_without_a_main_guard_says_what_to_do(tmp_path, fmu_dir):
-    """With jobs=2 the workers import the script again: crankfmu stops with a WorkerStartError
-    that names the guard (before: multiprocessing's RuntimeError in every worker, and lost
-    runs)."""
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="forked workers: Linux")
+def test_forked_workers_run_a_script_without_a_main_guard_once(tmp_path, fmu_dir):
+    """On Linux the pool's workers are forked from the calling process (executor.start_method):
+    they do not import the script again, so its body runs once with jobs=2 too (before, with
+    spawned workers: the WorkerStartError of the next test)."""
     done = _script(tmp_path, 2, fmu_dir)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.count("the script's body ran") == 1
+    assert "done: 2 sweep runs, 1 accuracy runs" in done.stdout
+
+
+def test_a_pool_from_a_script_without_a_main_guard_says_what_to_do(tmp_path, fmu_dir):
+    """With jobs=2 spawned workers (macOS, Windows; CRANKFMU_START_METHOD=spawn) import the
+    script again: crankfmu stops with a WorkerStartError that names the guard (before:
+    multiprocessing's RuntimeError in every worker, and lost runs)."""
+    done = _script(tmp_path, 2, fmu_dir, "spawn")
     assert done.returncode == 1 and "done:" not in done.stdout
     last = done.stderr.strip().splitlines()[-1]
     assert last.startswith("crankfmu.cosim.companions.WorkerStartError: ") and \

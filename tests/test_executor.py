@@ -8,6 +8,10 @@ from __future__ import annotations
 import copy
 import json
 import math
+import sys
+from pathlib import Path
+
+import pytest
 
 from crankfmu.system.load import load_scene
 from crankfmu.studies.executor import LocalPoolExecutor
@@ -118,15 +122,26 @@ def pid_and_worker_folder() -> tuple[int, str]:
     return os.getpid(), folder
 
 
-def test_workers_that_the_pool_ends_remove_their_folders(tmp_path):
+def run_pool_script(script: str, tmp: Path, start_method: str):
+    """Run `script` in a fresh interpreter from the project's root, its temporary folders in
+    `tmp`, its pools' workers started by `start_method`; it must succeed."""
+    import os
+    import subprocess
+
+    from tests.conftest import ROOT
+    done = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True,
+                          text=True, timeout=120, env={**os.environ, "TMPDIR": str(tmp),
+                                                       "CRANKFMU_START_METHOD": start_method})
+    assert done.returncode == 0, done.stderr[-3000:]
+    return done
+
+
+@pytest.mark.parametrize("start_method", ["fork", "spawn"])
+def test_workers_that_the_pool_ends_remove_their_folders(tmp_path, start_method):
     """When a worker dies (here SIGKILL), the pool ends the others with SIGTERM, whose default
     action runs no exit handler: before, they left their temporary folders. Only the killed
     worker's folder may remain."""
-    import os
-    import subprocess
-    import sys
 
-    from tests.conftest import ROOT
     script = (
         "import os, signal\n"
         "from crankfmu.studies.executor import LocalPoolExecutor\n"
@@ -150,9 +165,61 @@ def test_workers_that_the_pool_ends_remove_their_folders(tmp_path):
         "            break\n"
         "        time.sleep(0.05)\n"
         "print(workers[0][1])\n")
-    done = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True,
-                          text=True, timeout=120, env={**os.environ, "TMPDIR": str(tmp_path)})
-    assert done.returncode == 0, done.stderr[-3000:]
+    done = run_pool_script(script, tmp_path, start_method)
     broken, killed = done.stdout.split()
     assert broken == "BrokenProcessPool"
     assert [str(p) for p in tmp_path.iterdir()] == [killed]
+
+
+@pytest.mark.parametrize("start_method", ["fork", "spawn"])
+def test_workers_of_a_closed_pool_leave_no_folder_and_not_the_parents(tmp_path, start_method):
+    """A pool closed as a study ends: its workers remove their own temporary folders, and a
+    forked worker leaves its parent's alone. Before the start method was chosen, a forked
+    worker would have left its folders (it exits without running atexit's handlers), or
+    removed the parent's (it inherits the parent's record of its private folders)."""
+
+    script = (
+        "from crankfmu.studies.executor import LocalPoolExecutor, _worker_dir\n"
+        "from crankfmu.fmu.archive import _new_private\n"
+        "from tests.test_executor import pid_and_worker_folder\n"
+        "mine = _new_private('crankfmu-parent-')\n"  # the parent's own private folder
+        "pool = LocalPoolExecutor(2)\n"
+        "workers = [f.result() for f in [pool._pool.submit(pid_and_worker_folder)\n"
+        "                                for _ in range(2)]]\n"
+        "pool.close()\n"
+        "import os\n"
+        "print(mine, os.path.isdir(mine), len({pid for pid, _ in workers}))\n")
+    done = run_pool_script(script, tmp_path, start_method)
+    mine, kept, workers = done.stdout.split()
+    assert kept == "True" and workers == "2"  # the parent's folder outlived the pool
+    # at the parent's exit its own folder goes too: nothing is left
+    assert list(tmp_path.iterdir()) == [], [p.name for p in tmp_path.iterdir()]
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="forked workers: Linux")
+def test_workers_are_forked_only_from_a_process_without_fmus_and_threads(fmu_dir):
+    """start_method: fork from a process that has loaded no FMU binary and runs one thread;
+    spawn once it has run a scene (a pythonfmu binary can leave the interpreter that ran it
+    corrupt: a copy would inherit that) or while another thread runs (a copy could inherit a
+    lock that thread holds)."""
+    import os
+    import subprocess
+
+    from tests.conftest import ROOT
+    script = (
+        "import threading, crankfmu\n"
+        "from crankfmu.studies.executor import start_method\n"
+        "first = start_method()\n"
+        "stop = threading.Event()\n"
+        "thread = threading.Thread(target=stop.wait)\n"
+        "thread.start()\n"
+        "with_thread = start_method()\n"
+        "stop.set(); thread.join()\n"
+        f"crankfmu.simulate({str(SCENARIOS / 'servo_press.toml')!r}, stop_time=0.01, "
+        f"fmu_dir={str(fmu_dir)!r}, estimate=False)\n"
+        "print(first, with_thread, start_method())\n")
+    env = {k: v for k, v in os.environ.items() if k != "CRANKFMU_START_METHOD"}
+    done = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True,
+                          text=True, timeout=120, env=env)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert done.stdout.split() == ["fork", "spawn", "spawn"]

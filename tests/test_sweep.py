@@ -222,13 +222,17 @@ def _session_processes(sid: int) -> list[tuple[int, str]]:
 
 
 @pytest.mark.skipif(not Path("/proc/self/stat").is_file(), reason="reads /proc (Linux)")
-def test_kill_9_of_a_sweep_leaves_no_process_and_no_temporary_folder(tmp_path, rotor_fmu_dir):
+@pytest.mark.parametrize("start_method", ["fork", "spawn"])
+def test_kill_9_of_a_sweep_leaves_no_process_and_no_temporary_folder(tmp_path, rotor_fmu_dir,
+                                                                     start_method):
     """Issue #27. Before: after `kill -9` of `crankfmu sweep --jobs 2`, its 2 workers waited on
     their task queue for good, and with them multiprocessing's resource tracker (one set was
     still alive after 14 minutes). Now each worker ends when the pipe only its parent writes to
     closes, removing its temporary folders, and the tracker ends after them. The sweep runs in
     its own session; every process of that session must be gone within 30 s of the kill (the
-    workers see the pipe close at once; the bound is for a loaded machine)."""
+    workers see the pipe close at once; the bound is for a loaded machine). Forked workers too:
+    each closes its copy of the pipe's write end (without that, the pipe stayed open and they
+    waited for good)."""
     import subprocess
     import sys
     scene = spinner(tmp_path, stop=200.0)  # runs of seconds: the sweep is killed mid-run
@@ -237,12 +241,14 @@ def test_kill_9_of_a_sweep_leaves_no_process_and_no_temporary_folder(tmp_path, r
     sweep_process = subprocess.Popen(
         [sys.executable, "-m", "crankfmu", "sweep", str(scene), *(f"--vary={v}" for v in VARY),
          "--jobs", "2", "--fmus", str(rotor_fmu_dir), "--out", str(tmp_path / "out"),
-         "--no-progress"], start_new_session=True, env={**os.environ, "TMPDIR": str(tmp)},
-        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+         "--no-progress"], start_new_session=True, stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        env={**os.environ, "TMPDIR": str(tmp), "CRANKFMU_START_METHOD": start_method})
     sid = sweep_process.pid
     try:
         end = time.time() + 120
-        while len([c for _, c in _session_processes(sid) if "spawn_main" in c]) < 2:
+        while len([p for p, c in _session_processes(sid)  # the workers
+                   if p != sid and "resource_tracker" not in c]) < 2:
             assert time.time() < end and sweep_process.poll() is None, \
                 sweep_process.stderr.read().decode()[-2000:]
             time.sleep(0.1)

@@ -1,6 +1,7 @@
 """Run a scene: load the FMUs it names, wire them, initialize, step a master, write results."""
 from __future__ import annotations
 
+import functools
 import math
 import signal
 import sys
@@ -563,6 +564,22 @@ def _progress(steps, enabled, label, total=None):
     return _LateBar(dict(total=len(steps), desc=label, unit="step")).over(steps)
 
 
+def progress_bar(iterable=None, **options):
+    """A tqdm bar (tqdm's keywords) without tqdm's monitor thread: that thread would keep this
+    process multi-threaded for good, and a study's pool started later could then not fork its
+    workers (crankfmu.studies.executor.start_method). Every bar crankfmu draws is one."""
+    return _bar_class()(iterable, **options)
+
+
+@functools.lru_cache(maxsize=1)
+def _bar_class():
+    from tqdm import tqdm
+
+    class Bar(tqdm):
+        monitor_interval = 0  # no monitor thread (its miniters tuning matters to no bar here)
+    return Bar
+
+
 class _LateBar:
     """A tqdm bar made at the first update half a second after this object: update(n), close()."""
 
@@ -574,9 +591,8 @@ class _LateBar:
         if self._bar is not None:
             self._bar.update(n)
         elif time.perf_counter() - self._start >= 0.5:
-            from tqdm import tqdm
-            self._bar = tqdm(initial=self._done, disable=False, mininterval=0.5, leave=False,
-                             **self._options)
+            self._bar = progress_bar(initial=self._done, disable=False, mininterval=0.5,
+                                     leave=False, **self._options)
 
     def close(self) -> None:
         if self._bar is not None:

@@ -66,6 +66,13 @@ def remove_unpacked(for_good: bool = False) -> None:
             _private_lock.release()
 
 
+def forget_private() -> None:
+    """In a forked child: drop the parent's private folders and loaded FMUs from the records,
+    leaving the folders (the parent removes them; the cache is shared)."""
+    _private.clear()
+    _loaded.clear()
+
+
 def _new_private(prefix: str, parent: str | Path | None = None) -> str:
     with _private_lock:
         folder = tempfile.mkdtemp(prefix=prefix, dir=parent)

@@ -56,17 +56,33 @@ def release_pythonfmu_states() -> int:
     if not sys.platform.startswith("linux"):
         return 0  # measured on Linux only (glibc exit order); the Windows DllMain path differs
     released = 0
-    for name in _loaded_libraries():
-        try:  # RTLD_NOLOAD: only a handle to the already loaded copy, never a new load
-            lib = ctypes.CDLL(os.fsdecode(name), mode=os.RTLD_NOLOAD | os.RTLD_LAZY)
-            release = lib.finalizePythonInterpreter
-            lib.fmi2Instantiate  # noqa: B018 - a probe: a pythonfmu FMU binary, not some other library
-        except (OSError, AttributeError):
-            continue
+    for lib in _pythonfmu_binaries():
+        release = lib.finalizePythonInterpreter
         release.restype = None
         release()
         released += 1
     return released
+
+
+def _pythonfmu_binaries() -> list[ctypes.CDLL]:
+    """The pythonfmu FMU binaries loaded in this process (Linux)."""
+    found = []
+    for name in _loaded_libraries():
+        try:  # RTLD_NOLOAD: only a handle to the already loaded copy, never a new load
+            lib = ctypes.CDLL(os.fsdecode(name), mode=os.RTLD_NOLOAD | os.RTLD_LAZY)
+            lib.finalizePythonInterpreter  # noqa: B018 - probes: a pythonfmu FMU binary,
+            lib.fmi2Instantiate  # noqa: B018 - not some other library
+        except (OSError, AttributeError):
+            continue
+        found.append(lib)
+    return found
+
+
+def fmu_binaries_loaded() -> bool:
+    """Whether this process has loaded a pythonfmu FMU binary (Linux; False elsewhere): a
+    study's pool forks its workers only from a process that has not
+    (crankfmu.studies.executor.start_method)."""
+    return sys.platform.startswith("linux") and bool(_pythonfmu_binaries())
 
 
 atexit.register(release_pythonfmu_states)

@@ -133,6 +133,6 @@ def write_reference(scene: Scene, out: Path, result: ReferenceResult,
 def _progress(items, enabled, label):
     if enabled is False:
         return items
-    from tqdm import tqdm
-    return tqdm(items, desc=f"{label} reference", unit="pt", mininterval=0.5, leave=False,
-                disable=None if enabled is None else False)
+    from ..cosim.runner import progress_bar
+    return progress_bar(items, desc=f"{label} reference", unit="pt", mininterval=0.5,
+                        leave=False, disable=None if enabled is None else False)

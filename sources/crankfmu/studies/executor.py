@@ -8,11 +8,14 @@ process. Three implementations of one interface (make_executor chooses by --jobs
     InProcessExecutor()         jobs = 1: every run in this process, one after another, as
                                 `crankfmu run` runs: no worker to start, and a script calling
                                 the API needs no main guard.
-    LocalPoolExecutor(jobs)     concurrent.futures.ProcessPoolExecutor, spawn context (a fresh
-                                interpreter per worker, nothing inherited from the parent): a
-                                script calling the API needs `if __name__ == "__main__":`
-                                (cosim.companions.MAIN_GUARD; a missing one is a
-                                WorkerStartError, not a study of lost runs).
+    LocalPoolExecutor(jobs)     concurrent.futures.ProcessPoolExecutor. On Linux, while the
+                                parent runs one thread, its workers are forked: copies of the
+                                parent with crankfmu, fmpy and numpy imported, that drop what
+                                is the parent's (_forget_parent). Elsewhere (or with
+                                CRANKFMU_START_METHOD=spawn) they are spawned, fresh
+                                interpreters: a script calling the API then needs
+                                `if __name__ == "__main__":` (cosim.companions.MAIN_GUARD; a
+                                missing one is a WorkerStartError, not a study of lost runs).
     DaskExecutor(address)       a Dask distributed cluster (distributed.Client). No shared disk is
                                 assumed: each FMU file is sent once with Client.upload_file
                                 (kept by the scheduler for workers that restart or join later;
@@ -41,6 +44,7 @@ import hashlib
 import json
 import os
 import socket
+import sys
 import tempfile
 import threading
 import time
@@ -150,28 +154,80 @@ def _worker_dir() -> Path:
     return _WORKER_DIR
 
 
-def _start_worker(lifeline) -> None:
+def start_method() -> str:
+    """The local pool's start method: "fork" on Linux while this process runs one thread and
+    has loaded no FMU binary (a worker then starts as a copy of this process, with what it
+    imported: 0.3 s of CPU less per worker than a fresh interpreter, benchmarks/sweep.py; and
+    a script without a main guard is not run again in it), else "spawn": forking a process
+    with other threads can copy a lock another thread holds, a pythonfmu binary can leave the
+    interpreter that ran it corrupt (docs/architecture.md, "Parallel runs"), and macOS and
+    Windows offer no safe fork. CRANKFMU_START_METHOD=spawn or fork chooses (the tests run
+    both)."""
+    import multiprocessing
+
+    from ..fmu.instance import fmu_binaries_loaded
+    chosen = os.environ.get("CRANKFMU_START_METHOD", "")
+    if chosen in ("fork", "spawn"):
+        return chosen
+    if sys.platform.startswith("linux") and threading.active_count() == 1 \
+            and "fork" in multiprocessing.get_all_start_methods() and not fmu_binaries_loaded():
+        return "fork"
+    return "spawn"
+
+
+def _start_worker(lifeline, parent_end=None) -> None:
     """A pool worker's initializer. It imports what a run needs, as the pool starts (beside the
-    parent's own preparation, not after it); it shows Python warnings on one line each, as the
-    command line does (not with the source line of the warning, between a study's table rows);
-    it skips the last garbage collections at exit (gc.freeze, as crankfmu.cli does: the parent
-    waits for its workers to end); it ends this worker with its parent (_end_with_parent), and
-    on SIGTERM (what the pool sends the other workers when one died) with its temporary
-    folders."""
+    parent's own preparation, not after it; a forked worker has it already, and drops what is
+    the parent's: _forget_parent, given `parent_end`, its copy of the lifeline's write end); it
+    shows Python warnings on one line each, as the command line does (not with the source line
+    of the warning, between a study's table rows); it skips the last garbage collections at
+    exit (gc.freeze, as crankfmu.cli does: the parent waits for its workers to end); it removes
+    its temporary folders at exit (_remove_own_folders) and ends with its parent
+    (_end_with_parent), and on SIGTERM (what the pool sends the other workers when one died)
+    with its temporary folders."""
     import atexit
     import gc
     import signal
-    import sys
     import warnings
+    from multiprocessing.util import Finalize
 
+    if parent_end is not None:
+        _forget_parent(parent_end)
     import crankfmu.cosim.runner  # noqa: F401 - fmpy, lxml, the masters, the wiring
     from ..errors import warning_text
     warnings.showwarning = lambda message, category, *where, **_: print(
         f"warning: {warning_text(message, category)}", file=sys.stderr, flush=True)
     atexit.register(gc.freeze)
+    # multiprocessing's own exit handlers run in a forked worker too (it leaves by os._exit,
+    # without atexit's)
+    Finalize(None, _remove_own_folders, exitpriority=0)
     signal.signal(signal.SIGTERM, lambda signum, frame: threading.Thread(
         target=_leave, args=(128 + signum,), daemon=True).start())  # the lock may be held here
     _end_with_parent(lifeline)
+
+
+def _forget_parent(parent_end) -> None:
+    """In a forked worker: close its copy of the lifeline's write end (else the pipe would not
+    close when the parent ends), and forget the parent's temporary folders (its worker folder,
+    its private unpacked FMUs: the parent removes them, not this worker) and its Ctrl-C
+    handler (a spawned worker has Python's default: KeyboardInterrupt)."""
+    import signal
+
+    from ..fmu.archive import forget_private
+    global _WORKER_DIR
+    parent_end.close()
+    _WORKER_DIR = None
+    forget_private()
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+def _remove_own_folders() -> None:
+    """At a worker's exit: its temporary folders."""
+    from ..fmu.archive import remove_tree, remove_unpacked
+    with _WORKER_DIR_LOCK:
+        if _WORKER_DIR is not None:
+            remove_tree(_WORKER_DIR)
+    remove_unpacked()
 
 
 def _end_with_parent(lifeline) -> None:
@@ -319,8 +375,9 @@ def write_run_files(output: RunOutput, csv: Path, fmu_paths: dict | None = None)
 def _bar(total: int, progress, label: str):
     if progress is False:
         return None
-    from tqdm import tqdm
-    return tqdm(total=total, desc=label, unit="run", disable=None if progress is None else False)
+    from ..cosim.runner import progress_bar
+    return progress_bar(total=total, desc=label, unit="run",
+                        disable=None if progress is None else False)
 
 
 class Executor:
@@ -405,10 +462,12 @@ class LocalPoolExecutor(Executor):
         from concurrent.futures import ProcessPoolExecutor
 
         from ..cosim.companions import guarded_start
-        context = multiprocessing.get_context("spawn")
+        context = multiprocessing.get_context(start_method())
         self._lifeline = context.Pipe(duplex=False)
-        pool = ProcessPoolExecutor(max_workers=self.jobs, mp_context=context,
-                                   initializer=_start_worker, initargs=(self._lifeline[0],))
+        forked = context.get_start_method() == "fork"
+        pool = ProcessPoolExecutor(
+            max_workers=self.jobs, mp_context=context, initializer=_start_worker,
+            initargs=(self._lifeline[0], self._lifeline[1] if forked else None))
         with guarded_start():  # each submit to a pool without an idle worker starts one
             self._started = [pool.submit(_ready) for _ in range(self.jobs)]
         return pool

@@ -12,5 +12,5 @@ def progress_over(items, label: str, unit: str):
     only (tqdm's disable=None), and not with -q (which hides the notes too)."""
     if not logging.getLogger("crankfmu").isEnabledFor(logging.INFO):
         return items
-    from tqdm import tqdm
-    return tqdm(items, desc=label, unit=unit, disable=None, leave=False)
+    from ..cosim.runner import progress_bar
+    return progress_bar(items, desc=label, unit=unit, disable=None, leave=False)
