@@ -197,17 +197,21 @@ def test_workers_of_a_closed_pool_leave_no_folder_and_not_the_parents(tmp_path, 
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="forked workers: Linux")
-def test_workers_are_forked_only_from_a_process_without_fmus_and_threads(fmu_dir):
-    """start_method: fork from a process that has loaded no FMU binary and runs one thread;
-    spawn once it has run a scene (a pythonfmu binary can leave the interpreter that ran it
-    corrupt: a copy would inherit that) or while another thread runs (a copy could inherit a
-    lock that thread holds)."""
+def test_workers_are_forked_unless_an_fmu_call_failed_or_a_thread_runs(fmu_dir):
+    """start_method: fork from a process that runs one thread, after a run too; spawn while
+    another thread runs (a copy could inherit a lock that thread holds) and after an FMU call
+    failed in the process (a pythonfmu binary can leave the interpreter that ran an exception
+    inside it corrupt: a copy would inherit that). The failure is a doStep that fails as an
+    FMU's does (fmpy's FMICallException), in the runner's stepping."""
     import os
     import subprocess
 
     from tests.conftest import ROOT
+    scene = str(SCENARIOS / "servo_press.toml")
     script = (
         "import threading, crankfmu\n"
+        "from fmpy.fmi1 import FMICallException\n"
+        "from crankfmu.fmu.instance import FmuInstance\n"
         "from crankfmu.studies.executor import start_method\n"
         "first = start_method()\n"
         "stop = threading.Event()\n"
@@ -215,11 +219,20 @@ def test_workers_are_forked_only_from_a_process_without_fmus_and_threads(fmu_dir
         "thread.start()\n"
         "with_thread = start_method()\n"
         "stop.set(); thread.join()\n"
-        f"crankfmu.simulate({str(SCENARIOS / 'servo_press.toml')!r}, stop_time=0.01, "
-        f"fmu_dir={str(fmu_dir)!r}, estimate=False)\n"
-        "print(first, with_thread, start_method())\n")
+        f"crankfmu.simulate({scene!r}, stop_time=0.01, fmu_dir={str(fmu_dir)!r}, "
+        "estimate=False)\n"
+        "after_run = start_method()\n"
+        "def fails(self, t, h):\n"
+        "    raise FMICallException(function='fmi2DoStep', status=3)\n"
+        "FmuInstance.do_step = fails\n"
+        "try:\n"
+        f"    crankfmu.simulate({scene!r}, stop_time=0.01, fmu_dir={str(fmu_dir)!r}, "
+        "estimate=False)\n"
+        "except Exception as err:\n"
+        "    print(type(err).__name__)\n"
+        "print(first, with_thread, after_run, start_method())\n")
     env = {k: v for k, v in os.environ.items() if k != "CRANKFMU_START_METHOD"}
     done = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True,
                           text=True, timeout=120, env=env)
     assert done.returncode == 0, done.stderr[-3000:]
-    assert done.stdout.split() == ["fork", "spawn", "spawn"]
+    assert done.stdout.split()[-4:] == ["fork", "spawn", "fork", "spawn"], done.stdout

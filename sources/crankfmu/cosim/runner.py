@@ -17,7 +17,7 @@ from lxml import etree
 
 from ..errors import CrankfmuError, InterruptedRun
 from ..system.scene import Scene, SceneError, check_run_size
-from ..fmu.instance import FmuInstance, LogCollector
+from ..fmu.instance import FmuInstance, LogCollector, note_failed_call
 from ..masters import DivergenceError, Master, OptionError, make_master, traits
 from ..masters.inputs import split_at_edges, step_edges
 from .results import (Recorder, check_record_size, check_run_set, column_units, failed_csv,
@@ -327,9 +327,11 @@ def _step(scene: Scene, run: LoadedRun, options: RunOptions, interrupt) -> Stepp
     except DivergenceError as err:
         failure, outcome = str(err), "failed"
     except FMICallException as err:
+        note_failed_call()
         failure, outcome = _fmi_failure(err, run.fmus, run.log, master.time
                                         if master.time is not None else t), "failed"
     except (ArithmeticError, ValueError, RuntimeError, OSError) as err:  # say it, keep the rows
+        note_failed_call()  # perhaps inside an FMU (the Model Exchange master's calls)
         failure, outcome = f"stopped near t = {master.time or t:.6g} s: " \
                            f"{type(err).__name__}: {err}", "failed"
     finally:

@@ -56,33 +56,33 @@ def release_pythonfmu_states() -> int:
     if not sys.platform.startswith("linux"):
         return 0  # measured on Linux only (glibc exit order); the Windows DllMain path differs
     released = 0
-    for lib in _pythonfmu_binaries():
-        release = lib.finalizePythonInterpreter
+    for name in _loaded_libraries():
+        try:  # RTLD_NOLOAD: only a handle to the already loaded copy, never a new load
+            lib = ctypes.CDLL(os.fsdecode(name), mode=os.RTLD_NOLOAD | os.RTLD_LAZY)
+            release = lib.finalizePythonInterpreter
+            lib.fmi2Instantiate  # noqa: B018 - a probe: a pythonfmu FMU binary, not some other library
+        except (OSError, AttributeError):
+            continue
         release.restype = None
         release()
         released += 1
     return released
 
 
-def _pythonfmu_binaries() -> list[ctypes.CDLL]:
-    """The pythonfmu FMU binaries loaded in this process (Linux)."""
-    found = []
-    for name in _loaded_libraries():
-        try:  # RTLD_NOLOAD: only a handle to the already loaded copy, never a new load
-            lib = ctypes.CDLL(os.fsdecode(name), mode=os.RTLD_NOLOAD | os.RTLD_LAZY)
-            lib.finalizePythonInterpreter  # noqa: B018 - probes: a pythonfmu FMU binary,
-            lib.fmi2Instantiate  # noqa: B018 - not some other library
-        except (OSError, AttributeError):
-            continue
-        found.append(lib)
-    return found
+_FAILED_CALLS = [0]  # FMI calls that failed in this process (note_failed_call)
 
 
-def fmu_binaries_loaded() -> bool:
-    """Whether this process has loaded a pythonfmu FMU binary (Linux; False elsewhere): a
-    study's pool forks its workers only from a process that has not
+def note_failed_call() -> None:
+    """Record that an FMU call failed in this process: pythonfmu 0.7.0 can leave the interpreter
+    that ran a Python exception inside an FMU corrupt (a later run segfaulted in the garbage
+    collector), so a study's pool no longer forks its workers from it
     (crankfmu.studies.executor.start_method)."""
-    return sys.platform.startswith("linux") and bool(_pythonfmu_binaries())
+    _FAILED_CALLS[0] += 1
+
+
+def failed_calls() -> int:
+    """How many FMU calls failed in this process (note_failed_call)."""
+    return _FAILED_CALLS[0]
 
 
 atexit.register(release_pythonfmu_states)

@@ -156,21 +156,21 @@ def _worker_dir() -> Path:
 
 def start_method() -> str:
     """The local pool's start method: "fork" on Linux while this process runs one thread and
-    has loaded no FMU binary (a worker then starts as a copy of this process, with what it
+    no FMU call has failed in it (a worker then starts as a copy of this process, with what it
     imported: 0.3 s of CPU less per worker than a fresh interpreter, benchmarks/sweep.py; and
     a script without a main guard is not run again in it), else "spawn": forking a process
     with other threads can copy a lock another thread holds, a pythonfmu binary can leave the
-    interpreter that ran it corrupt (docs/architecture.md, "Parallel runs"), and macOS and
-    Windows offer no safe fork. CRANKFMU_START_METHOD=spawn or fork chooses (the tests run
-    both)."""
+    interpreter that ran an exception inside it corrupt (fmu.instance.note_failed_call), and
+    macOS and Windows offer no safe fork. CRANKFMU_START_METHOD=spawn or fork chooses (the
+    tests run both)."""
     import multiprocessing
 
-    from ..fmu.instance import fmu_binaries_loaded
+    from ..fmu.instance import failed_calls
     chosen = os.environ.get("CRANKFMU_START_METHOD", "")
     if chosen in ("fork", "spawn"):
         return chosen
     if sys.platform.startswith("linux") and threading.active_count() == 1 \
-            and "fork" in multiprocessing.get_all_start_methods() and not fmu_binaries_loaded():
+            and "fork" in multiprocessing.get_all_start_methods() and not failed_calls():
         return "fork"
     return "spawn"
 
