@@ -42,7 +42,7 @@ def main() -> int:
     scene = load_scene(scene_path)
     for name in scene.components:  # build once, outside the timing
         resolve_fmu(scene, name, ROOT / "fmus")
-    from crankfmu.studies.executor import start_method
+    from crankfmu.cosim.workers import start_method
     print(f"servo press, 12 runs of {args.stop_time:g} s, {os.cpu_count()} cores, "
           f"load average {os.getloadavg()[0]:.2f} at start; workers started by "
           f"{start_method()} (CRANKFMU_START_METHOD=spawn or fork to choose)")

@@ -233,7 +233,7 @@ def test_a_script_without_a_main_guard_runs_once_with_jobs_1(tmp_path, fmu_dir):
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="forked workers: Linux")
 def test_forked_workers_run_a_script_without_a_main_guard_once(tmp_path, fmu_dir):
-    """On Linux the pool's workers are forked from the calling process (executor.start_method):
+    """On Linux the pool's workers are forked from the calling process (cosim.workers.start_method):
     they do not import the script again, so its body runs once with jobs=2 too (before, with
     spawned workers: the WorkerStartError of the next test)."""
     done = _script(tmp_path, 2, fmu_dir)

@@ -4,8 +4,12 @@ left running is stopped, not waited for."""
 from __future__ import annotations
 
 import time
+from pathlib import Path
+
+import pytest
 
 from tests.conftest import SCENARIOS
+from tests.test_sweep import _session_processes, rotor_fmu_dir, spinner  # noqa: F401
 from crankfmu.cosim.companions import Companions
 from crankfmu.cosim.runner import RunOptions, run_companion, run_scene
 from crankfmu.cosim.target import search
@@ -84,3 +88,47 @@ def test_a_run_that_stops_does_not_wait_for_its_companion(fmu_dir, monkeypatch):
         run_scene(scene, RunOptions(fmu_dir=fmu_dir, progress=False, estimate=True, jobs=2))
     # the companion alone takes ~10 s here (60000 steps of 0.5 ms); start-up and stop ~1 s
     assert time.perf_counter() - t0 < 5.0
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").is_file(), reason="reads /proc (Linux)")
+@pytest.mark.parametrize("start_method", ["fork", "spawn"])
+def test_kill_9_of_a_run_ends_its_companion_worker(tmp_path, rotor_fmu_dir, start_method):
+    """`crankfmu run --jobs 2` runs its estimate's companion in a worker; killed with kill -9
+    mid-run, the run leaves no process and no temporary folder behind within 30 s (a loaded
+    machine's bound): the worker ends when the pipe only its parent writes to closes
+    (cosim/workers.py), as a sweep's workers do. Before, that worker (the standard library's
+    pool, spawned) went on with its companion run and waited on its task queue for good."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    scene = spinner(tmp_path, stop=200.0)  # a run of seconds: killed mid-run
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    run = subprocess.Popen(
+        [sys.executable, "-m", "crankfmu", "run", str(scene), "--jobs", "2", "--fmus",
+         str(rotor_fmu_dir), "--out", str(tmp_path / "out"), "--no-progress"],
+        start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+        env={**os.environ, "TMPDIR": str(tmp), "CRANKFMU_START_METHOD": start_method})
+    sid = run.pid
+    try:
+        end = time.time() + 120
+        while not [p for p, c in _session_processes(sid)  # the worker
+                   if p != sid and "resource_tracker" not in c]:
+            assert time.time() < end and run.poll() is None, run.stderr.read().decode()[-2000:]
+            time.sleep(0.1)
+        time.sleep(1.0)  # both load their FMUs and run
+        os.kill(run.pid, signal.SIGKILL)
+        run.wait()
+        end = time.time() + 30
+        while _session_processes(sid) and time.time() < end:
+            time.sleep(0.1)
+        left = _session_processes(sid)
+    finally:
+        for pid, _ in _session_processes(sid):  # what the test started, by its id
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:  # ended meanwhile
+                pass
+    assert left == [], left
+    assert not [p.name for p in tmp.iterdir() if p.name.startswith("crankfmu-")]

@@ -116,8 +116,8 @@ def pid_and_worker_folder() -> tuple[int, str]:
     import os
     import time
 
-    from crankfmu.studies.executor import _worker_dir
-    folder = str(_worker_dir())
+    from crankfmu.cosim.workers import worker_dir
+    folder = str(worker_dir())
     time.sleep(1.0)
     return os.getpid(), folder
 
@@ -150,12 +150,12 @@ def test_workers_that_the_pool_ends_remove_their_folders(tmp_path, start_method)
         "workers = [f.result() for f in [pool._pool.submit(pid_and_worker_folder)\n"
         "                                for _ in range(2)]]\n"
         "os.kill(workers[0][0], signal.SIGKILL)\n"
-        "try:\n"
-        "    pool._pool.submit(os.getpid).result()\n"
+        "import time\n"
+        "try:\n"  # a task still running when the pool sees the death: it breaks (a short
+        "    pool._pool.submit(time.sleep, 5).result()\n"  # one could end on the survivor first)
         "except Exception as err:\n"
         "    print(type(err).__name__)\n"
-        "pool.close()\n"
-        "import time\n"  # the survivor removes its folder on SIGTERM: wait until it has ended
+        "pool.close()\n"  # the survivor removes its folder on SIGTERM: wait until it has ended
         "deadline = time.monotonic() + 60\n"
         "for pid, _ in workers:\n"
         "    while time.monotonic() < deadline:\n"
@@ -179,7 +179,7 @@ def test_workers_of_a_closed_pool_leave_no_folder_and_not_the_parents(tmp_path, 
     removed the parent's (it inherits the parent's record of its private folders)."""
 
     script = (
-        "from crankfmu.studies.executor import LocalPoolExecutor, _worker_dir\n"
+        "from crankfmu.studies.executor import LocalPoolExecutor\n"
         "from crankfmu.fmu.archive import _new_private\n"
         "from tests.test_executor import pid_and_worker_folder\n"
         "mine = _new_private('crankfmu-parent-')\n"  # the parent's own private folder
@@ -212,7 +212,7 @@ def test_workers_are_forked_unless_an_fmu_call_failed_or_a_thread_runs(fmu_dir):
         "import threading, crankfmu\n"
         "from fmpy.fmi1 import FMICallException\n"
         "from crankfmu.fmu.instance import FmuInstance\n"
-        "from crankfmu.studies.executor import start_method\n"
+        "from crankfmu.cosim.workers import start_method\n"
         "first = start_method()\n"
         "stop = threading.Event()\n"
         "thread = threading.Thread(target=stop.wait)\n"

@@ -7,16 +7,16 @@ spare core the companions run in a worker process while this process runs the ma
 estimate then costs the slower of the two in wall time instead of their sum.
 
     Companions(jobs)      jobs = 1: each companion runs in this process when its result is
-                          asked for (after the main run); jobs > 1: a pool of
-                          jobs - 1 spawned workers (a fresh interpreter each, nothing inherited;
-                          the pool starts when the object is made, so its start-up overlaps the
-                          parent's own work).
+                          asked for (after the main run); jobs > 1: a pool of jobs - 1 workers
+                          (cosim/workers.py: forked on Linux, else fresh interpreters; they end
+                          with this process however it ends; the pool starts when the object is
+                          made, so its start-up overlaps the parent's own work).
     submit(run, *args) -> Pending; Pending.result() -> run(*args), a CompanionRun
                           (run: a module-level function, cosim.runner.run_companion)
 
-Measured (benchmarks/estimate_cost.py, benchmarks/target.py; docs/error_estimate.md, "What it costs"): a worker
-takes about 0.35 s to start and needs a free core; it pays on runs of a second or more and
-costs more on shorter ones or when the cores are busy, so the command line's default is 1.
+Measured (benchmarks/estimate_cost.py, benchmarks/target.py; docs/error_estimate.md, "What it
+costs"): a spawned worker takes about 0.35 s to start, a forked one little; either needs a free
+core, so the command line's default is 1.
 
 A run's numbers are a function of its scene and the FMU files only, so a companion gives the same
 series wherever it ran (tests/test_companions.py). The FMUs must exist in fmu_dir before a worker
@@ -27,8 +27,12 @@ from __future__ import annotations
 import contextlib
 import os
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from ..errors import CrankfmuError
+
+if TYPE_CHECKING:
+    from .workers import Lifeline
 
 # what a script must do for worker processes (multiprocessing's spawn imports the script again
 # in each worker, as the module __mp_main__: its body runs there up to the call that starts them)
@@ -69,10 +73,6 @@ class CompanionRun:
     result: object = None  # the cosim.runner.RunResult (the --target search may choose it)
 
 
-def _ready() -> int:
-    return os.getpid()
-
-
 class Pending:
     """A companion submitted: in a worker (a future; `started`, the future of the pool's first
     task) or to run here when asked for."""
@@ -109,13 +109,12 @@ class Companions:
     def __init__(self, jobs: int = 1):
         self.jobs = processes(int(jobs))
         self._pool = None
+        self._lifeline: Lifeline | None = None
         if self.jobs > 1:  # multiprocessing imported here: a run without workers skips it
-            import multiprocessing
-            from concurrent.futures import ProcessPoolExecutor
-            self._pool = ProcessPoolExecutor(max_workers=self.jobs - 1,
-                                             mp_context=multiprocessing.get_context("spawn"))
+            from .workers import new_pool, ready
+            self._pool, self._lifeline = new_pool(self.jobs - 1)
             with guarded_start():  # start the workers now, while the parent loads the FMUs
-                self._started = self._pool.submit(_ready)
+                self._started = self._pool.submit(ready)
 
     def submit(self, run, *args) -> Pending:
         if self._pool is None:
@@ -132,6 +131,8 @@ class Companions:
                 process.terminate()
         self._pool.shutdown(wait=not abandon, cancel_futures=True)
         self._pool = None
+        if self._lifeline is not None:
+            self._lifeline.close()
 
     def __enter__(self):
         return self

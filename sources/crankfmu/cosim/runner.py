@@ -569,7 +569,7 @@ def _progress(steps, enabled, label, total=None):
 def progress_bar(iterable=None, **options):
     """A tqdm bar (tqdm's keywords) without tqdm's monitor thread: that thread would keep this
     process multi-threaded for good, and a study's pool started later could then not fork its
-    workers (crankfmu.studies.executor.start_method). Every bar crankfmu draws is one."""
+    workers (crankfmu.cosim.workers.start_method). Every bar crankfmu draws is one."""
     return _bar_class()(iterable, **options)
 
 

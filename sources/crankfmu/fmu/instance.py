@@ -76,7 +76,7 @@ def note_failed_call() -> None:
     """Record that an FMU call failed in this process: pythonfmu 0.7.0 can leave the interpreter
     that ran a Python exception inside an FMU corrupt (a later run segfaulted in the garbage
     collector), so a study's pool no longer forks its workers from it
-    (crankfmu.studies.executor.start_method)."""
+    (crankfmu.cosim.workers.start_method)."""
     _FAILED_CALLS[0] += 1
 
 

@@ -8,14 +8,13 @@ process. Three implementations of one interface (make_executor chooses by --jobs
     InProcessExecutor()         jobs = 1: every run in this process, one after another, as
                                 `crankfmu run` runs: no worker to start, and a script calling
                                 the API needs no main guard.
-    LocalPoolExecutor(jobs)     concurrent.futures.ProcessPoolExecutor. On Linux, while the
-                                parent runs one thread, its workers are forked: copies of the
-                                parent with crankfmu, fmpy and numpy imported, that drop what
-                                is the parent's (_forget_parent). Elsewhere (or with
-                                CRANKFMU_START_METHOD=spawn) they are spawned, fresh
-                                interpreters: a script calling the API then needs
-                                `if __name__ == "__main__":` (cosim.companions.MAIN_GUARD; a
-                                missing one is a WorkerStartError, not a study of lost runs).
+    LocalPoolExecutor(jobs)     concurrent.futures.ProcessPoolExecutor of cosim/workers.py: on
+                                Linux its workers are forked from the parent (with its
+                                imports), elsewhere (or after an FMU call failed here)
+                                spawned, fresh interpreters: a script calling the API then
+                                needs `if __name__ == "__main__":` (cosim.companions.MAIN_GUARD;
+                                a missing one is a WorkerStartError, not a study of lost
+                                runs).
     DaskExecutor(address)       a Dask distributed cluster (distributed.Client). No shared disk is
                                 assumed: each FMU file is sent once with Client.upload_file
                                 (kept by the scheduler for workers that restart or join later;
@@ -44,7 +43,6 @@ import hashlib
 import json
 import os
 import socket
-import sys
 import tempfile
 import threading
 import time
@@ -55,6 +53,8 @@ from pathlib import Path
 from typing import Callable, Iterable
 
 import numpy as np
+
+from ..cosim.workers import worker_dir
 
 STATUSES = ("completed", "failed", "refused", "error", "lost")
 
@@ -139,128 +139,6 @@ def prepare_tasks(tasks: list[RunTask], fmu_dir: Path | None) -> dict[str, Path]
 
 # -- the worker's side -----------------------------------------------------------------------------
 _RUN_LOCK = threading.Lock()  # one run at a time per process (threads would share the GIL anyway)
-_WORKER_DIR: Path | None = None
-_WORKER_DIR_LOCK = threading.Lock()  # made, or removed when the parent is gone: one at a time
-
-
-def _worker_dir() -> Path:
-    global _WORKER_DIR
-    with _WORKER_DIR_LOCK:
-        if _WORKER_DIR is None:
-            import atexit
-            import shutil
-            _WORKER_DIR = Path(tempfile.mkdtemp(prefix=f"crankfmu-worker-{os.getpid()}-"))
-            atexit.register(shutil.rmtree, _WORKER_DIR, True)
-    return _WORKER_DIR
-
-
-def start_method() -> str:
-    """The local pool's start method: "fork" on Linux while this process runs one thread and
-    no FMU call has failed in it (a worker then starts as a copy of this process, with what it
-    imported: 0.3 s of CPU less per worker than a fresh interpreter, benchmarks/sweep.py; and
-    a script without a main guard is not run again in it), else "spawn": forking a process
-    with other threads can copy a lock another thread holds, a pythonfmu binary can leave the
-    interpreter that ran an exception inside it corrupt (fmu.instance.note_failed_call), and
-    macOS and Windows offer no safe fork. CRANKFMU_START_METHOD=spawn or fork chooses (the
-    tests run both)."""
-    import multiprocessing
-
-    from ..fmu.instance import failed_calls
-    chosen = os.environ.get("CRANKFMU_START_METHOD", "")
-    if chosen in ("fork", "spawn"):
-        return chosen
-    if sys.platform.startswith("linux") and threading.active_count() == 1 \
-            and "fork" in multiprocessing.get_all_start_methods() and not failed_calls():
-        return "fork"
-    return "spawn"
-
-
-def _start_worker(lifeline, parent_end=None) -> None:
-    """A pool worker's initializer. It imports what a run needs, as the pool starts (beside the
-    parent's own preparation, not after it; a forked worker has it already, and drops what is
-    the parent's: _forget_parent, given `parent_end`, its copy of the lifeline's write end); it
-    shows Python warnings on one line each, as the command line does (not with the source line
-    of the warning, between a study's table rows); it skips the last garbage collections at
-    exit (gc.freeze, as crankfmu.cli does: the parent waits for its workers to end); it removes
-    its temporary folders at exit (_remove_own_folders) and ends with its parent
-    (_end_with_parent), and on SIGTERM (what the pool sends the other workers when one died)
-    with its temporary folders."""
-    import atexit
-    import gc
-    import signal
-    import warnings
-    from multiprocessing.util import Finalize
-
-    if parent_end is not None:
-        _forget_parent(parent_end)
-    import crankfmu.cosim.runner  # noqa: F401 - fmpy, lxml, the masters, the wiring
-    from ..errors import warning_text
-    warnings.showwarning = lambda message, category, *where, **_: print(
-        f"warning: {warning_text(message, category)}", file=sys.stderr, flush=True)
-    atexit.register(gc.freeze)
-    # multiprocessing's own exit handlers run in a forked worker too (it leaves by os._exit,
-    # without atexit's)
-    Finalize(None, _remove_own_folders, exitpriority=0)
-    signal.signal(signal.SIGTERM, lambda signum, frame: threading.Thread(
-        target=_leave, args=(128 + signum,), daemon=True).start())  # the lock may be held here
-    _end_with_parent(lifeline)
-
-
-def _forget_parent(parent_end) -> None:
-    """In a forked worker: close its copy of the lifeline's write end (else the pipe would not
-    close when the parent ends), and forget the parent's temporary folders (its worker folder,
-    its private unpacked FMUs: the parent removes them, not this worker) and its Ctrl-C
-    handler (a spawned worker has Python's default: KeyboardInterrupt)."""
-    import signal
-
-    from ..fmu.archive import forget_private
-    global _WORKER_DIR
-    parent_end.close()
-    _WORKER_DIR = None
-    forget_private()
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-
-
-def _remove_own_folders() -> None:
-    """At a worker's exit: its temporary folders."""
-    from ..fmu.archive import remove_tree, remove_unpacked
-    with _WORKER_DIR_LOCK:
-        if _WORKER_DIR is not None:
-            remove_tree(_WORKER_DIR)
-    remove_unpacked()
-
-
-def _end_with_parent(lifeline) -> None:
-    """A thread that waits on `lifeline` (the read end of a pipe whose only write end the
-    parent holds, and nobody writes to) and ends this worker when the pipe closes: when the
-    parent ends, however it ends (kill -9 included: the kernel closes its files), or when it
-    closes the pool. Without it, a sweep killed with kill -9 left its workers waiting on their
-    task queue for good, and with them the resource tracker that multiprocessing starts for
-    the pool's queues (it ends when the last process holding its pipe ends)."""
-    def watch() -> None:
-        try:
-            lifeline.recv_bytes()
-        except (EOFError, OSError):
-            pass
-        _leave(0)
-    threading.Thread(target=watch, name="crankfmu-parent-watch", daemon=True).start()
-
-
-def _leave(status: int) -> None:
-    """End this worker now, with its temporary folders (os._exit runs no exit handler)."""
-    from ..fmu.archive import remove_tree, remove_unpacked
-    _WORKER_DIR_LOCK.acquire()  # kept: no folder is made after this
-    if _WORKER_DIR is not None:
-        remove_tree(_WORKER_DIR)
-    remove_unpacked(for_good=True)
-    os._exit(status)
-
-
-def _ready() -> None:
-    """A task that does nothing: submitted once per worker when a pool starts, so that every
-    worker starts (and imports, in _start_worker) at once."""
-
-
 def _materialize(task: RunTask, files: dict) -> dict[str, Path]:
     """component -> local FMU path. `files` maps digest to a path (same machine) or to the
     file's bytes (shipped), which are written once per process into a private folder."""
@@ -268,7 +146,7 @@ def _materialize(task: RunTask, files: dict) -> dict[str, Path]:
     for comp, (digest, filename) in task.fmus.items():
         source = files[digest]
         if isinstance(source, (bytes, bytearray)):
-            path = _worker_dir() / "fmus" / digest / filename
+            path = worker_dir() / "fmus" / digest / filename
             if not path.is_file():
                 path.parent.mkdir(parents=True, exist_ok=True)
                 part = path.with_suffix(f".part{threading.get_ident()}")
@@ -304,7 +182,7 @@ def _execute(task: RunTask, files: dict) -> RunOutput:
 
     out = RunOutput(task.key, "completed", worker=f"{socket.gethostname()}:{os.getpid()}")
     scene = copy.deepcopy(task.scene)
-    run_dir = Path(tempfile.mkdtemp(prefix="run-", dir=_worker_dir()))
+    run_dir = Path(tempfile.mkdtemp(prefix="run-", dir=worker_dir()))
     csv = run_dir / "run.csv"
     t0 = time.perf_counter()
     try:
@@ -448,7 +326,7 @@ class LocalPoolExecutor(Executor):
 
     The workers start with the executor, so that their start (an interpreter, the imports a run
     needs: about 0.3 s of CPU each) overlaps what the parent does before the first run. Each
-    worker ends with the parent, however the parent ends (`_end_with_parent`)."""
+    worker ends with the parent, however the parent ends (cosim/workers.py)."""
 
     def __init__(self, jobs: int | None = None, max_losses: int = 2):
         self.jobs = max(1, int(jobs or os.cpu_count() or 1))
@@ -458,18 +336,11 @@ class LocalPoolExecutor(Executor):
         self._pool = self._new_pool()
 
     def _new_pool(self):
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
-
         from ..cosim.companions import guarded_start
-        context = multiprocessing.get_context(start_method())
-        self._lifeline = context.Pipe(duplex=False)
-        forked = context.get_start_method() == "fork"
-        pool = ProcessPoolExecutor(
-            max_workers=self.jobs, mp_context=context, initializer=_start_worker,
-            initargs=(self._lifeline[0], self._lifeline[1] if forked else None))
+        from ..cosim.workers import new_pool, ready
+        pool, self._lifeline = new_pool(self.jobs)
         with guarded_start():  # each submit to a pool without an idle worker starts one
-            self._started = [pool.submit(_ready) for _ in range(self.jobs)]
+            self._started = [pool.submit(ready) for _ in range(self.jobs)]
         return pool
 
     def _check_started(self) -> None:
@@ -484,8 +355,7 @@ class LocalPoolExecutor(Executor):
     def _close_pool(self) -> None:
         self._pool.shutdown(wait=True, cancel_futures=True)
         self._pool = None
-        for end in self._lifeline:
-            end.close()
+        self._lifeline.close()
 
     def _run(self, tasks, files, done) -> None:
         from concurrent.futures import FIRST_COMPLETED, wait
@@ -559,11 +429,10 @@ def _execute_shipped(task: RunTask, names: dict) -> RunOutput:
     file name there); check their digests once per process, then run."""
     from distributed import get_worker
 
-    global _WORKER_DIR
     folder = Path(get_worker().local_directory)
-    if _WORKER_DIR is None:  # inside the worker's own folder: Dask removes it with the worker,
-        # also when the nanny ends the process without running atexit handlers
-        _WORKER_DIR = Path(tempfile.mkdtemp(prefix="crankfmu-", dir=folder))
+    # the worker folder inside Dask's own: Dask removes it with the worker, also when the
+    # nanny ends the process without running atexit handlers
+    worker_dir(under=folder)
     files = {}
     for digest, name in names.items():
         path = folder / name

@@ -1,0 +1,173 @@
+"""Worker processes on this machine: how they start, what they drop of their parent, how they
+end. Shared by the studies' local pool (crankfmu.studies.executor) and the error estimate's
+companion worker (cosim/companions.py).
+
+    new_pool(jobs) -> (pool, Lifeline)   a concurrent.futures.ProcessPoolExecutor whose workers
+                                         run start_worker first; closing the Lifeline (or the
+                                         parent's death) ends them
+    start_method()                       "fork" or "spawn" (its docstring says when)
+    worker_dir()                         this process's temporary folder, removed at its exit
+
+On Linux the workers are forked while the parent runs one thread and no FMU call has failed in
+it: a copy of the parent starts with crankfmu, fmpy and numpy imported, where a spawned
+interpreter spends about 0.3 s of CPU importing them (benchmarks/sweep.py), and a script without
+a main guard is not run again in it. A forked worker drops what is its parent's (_forget_parent).
+"""
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+import threading
+from pathlib import Path
+
+_WORKER_DIR: Path | None = None
+_WORKER_DIR_LOCK = threading.Lock()  # made, or removed when the parent is gone: one at a time
+
+
+def worker_dir(under: Path | None = None) -> Path:
+    """This process's temporary folder, made on first use (inside `under` if given: a Dask
+    worker's own folder, which Dask removes with it) and removed at the process's exit."""
+    global _WORKER_DIR
+    with _WORKER_DIR_LOCK:
+        if _WORKER_DIR is None:
+            import atexit
+            import shutil
+            _WORKER_DIR = Path(tempfile.mkdtemp(prefix=f"crankfmu-worker-{os.getpid()}-",
+                                                dir=under))
+            atexit.register(shutil.rmtree, _WORKER_DIR, True)
+    return _WORKER_DIR
+
+
+def start_method() -> str:
+    """The workers' start method: "fork" on Linux while this process runs one thread and no
+    FMU call has failed in it, else "spawn": forking a process with other threads can copy a
+    lock another thread holds, a pythonfmu binary can leave the interpreter that ran an
+    exception inside it corrupt (fmu.instance.note_failed_call), and macOS and Windows offer no
+    safe fork. CRANKFMU_START_METHOD=spawn or fork chooses (the tests run both)."""
+    import multiprocessing
+
+    from ..fmu.instance import failed_calls
+    chosen = os.environ.get("CRANKFMU_START_METHOD", "")
+    if chosen in ("fork", "spawn"):
+        return chosen
+    if sys.platform.startswith("linux") and threading.active_count() == 1 \
+            and "fork" in multiprocessing.get_all_start_methods() and not failed_calls():
+        return "fork"
+    return "spawn"
+
+
+class Lifeline:
+    """A pipe whose only write end the parent holds and nobody writes to: each worker waits on
+    its read end (_end_with_parent), so the workers end when the parent closes it or ends,
+    however it ends (kill -9 included: the kernel closes its files)."""
+
+    def __init__(self, context):
+        self.reader, self.writer = context.Pipe(duplex=False)
+
+    def close(self) -> None:
+        self.reader.close()
+        self.writer.close()
+
+
+def new_pool(jobs: int, preload: str = "crankfmu.cosim.runner"):
+    """(a ProcessPoolExecutor of `jobs` workers started by start_method(), its Lifeline). Each
+    worker imports the module `preload` as it starts (what its tasks need: by default fmpy,
+    lxml, the masters, the wiring)."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    context = multiprocessing.get_context(start_method())
+    lifeline = Lifeline(context)
+    forked = context.get_start_method() == "fork"
+    pool = ProcessPoolExecutor(max_workers=jobs, mp_context=context, initializer=start_worker,
+                               initargs=(lifeline.reader, preload,
+                                         lifeline.writer if forked else None))
+    return pool, lifeline
+
+
+def ready() -> int:
+    """A task that does nothing: submitted once per worker when a pool starts, so that every
+    worker starts (and imports, in start_worker) at once; returns the worker's pid."""
+    return os.getpid()
+
+
+def start_worker(lifeline, preload: str, parent_end=None) -> None:
+    """A pool worker's initializer. It imports `preload`, as the pool starts (beside the
+    parent's own preparation, not after it; a forked worker has it already, and drops what is
+    the parent's: _forget_parent, given `parent_end`, its copy of the lifeline's write end); it
+    shows Python warnings on one line each, as the command line does (not with the source line
+    of the warning, between a study's table rows); it skips the last garbage collections at
+    exit (gc.freeze, as crankfmu.cli does: the parent waits for its workers to end); it removes
+    its temporary folders at exit (_remove_own_folders) and ends with its parent
+    (_end_with_parent), and on SIGTERM (what a pool sends the other workers when one died, and
+    an abandoned companion worker gets) with its temporary folders."""
+    import atexit
+    import gc
+    import signal
+    import warnings
+    from multiprocessing.util import Finalize
+
+    if parent_end is not None:
+        _forget_parent(parent_end)
+    import importlib
+    importlib.import_module(preload)
+    from ..errors import warning_text
+    warnings.showwarning = lambda message, category, *where, **_: print(
+        f"warning: {warning_text(message, category)}", file=sys.stderr, flush=True)
+    atexit.register(gc.freeze)
+    # multiprocessing's own exit handlers run in a forked worker too (it leaves by os._exit,
+    # without atexit's)
+    Finalize(None, _remove_own_folders, exitpriority=0)
+    signal.signal(signal.SIGTERM, lambda signum, frame: threading.Thread(
+        target=_leave, args=(128 + signum,), daemon=True).start())  # the lock may be held here
+    _end_with_parent(lifeline)
+
+
+def _forget_parent(parent_end) -> None:
+    """In a forked worker: close its copy of the lifeline's write end (else the pipe would not
+    close when the parent ends), and forget the parent's temporary folders (its worker folder,
+    its private unpacked FMUs: the parent removes them, not this worker) and its Ctrl-C
+    handler (a spawned worker has Python's default: KeyboardInterrupt)."""
+    import signal
+
+    from ..fmu.archive import forget_private
+    global _WORKER_DIR
+    parent_end.close()
+    _WORKER_DIR = None
+    forget_private()
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+def _remove_own_folders() -> None:
+    """At a worker's exit: its temporary folders."""
+    from ..fmu.archive import remove_tree, remove_unpacked
+    with _WORKER_DIR_LOCK:
+        if _WORKER_DIR is not None:
+            remove_tree(_WORKER_DIR)
+    remove_unpacked()
+
+
+def _end_with_parent(lifeline) -> None:
+    """A thread that waits on `lifeline` (the read end of the Lifeline's pipe) and ends this
+    worker when the pipe closes. Without it, a sweep killed with kill -9 left its workers
+    waiting on their task queue for good, and with them the resource tracker that
+    multiprocessing starts for the pool's queues (it ends when the last process holding its
+    pipe ends)."""
+    def watch() -> None:
+        try:
+            lifeline.recv_bytes()
+        except (EOFError, OSError):
+            pass
+        _leave(0)
+    threading.Thread(target=watch, name="crankfmu-parent-watch", daemon=True).start()
+
+
+def _leave(status: int) -> None:
+    """End this worker now, with its temporary folders (os._exit runs no exit handler)."""
+    from ..fmu.archive import remove_tree, remove_unpacked
+    _WORKER_DIR_LOCK.acquire()  # kept: no folder is made after this
+    if _WORKER_DIR is not None:
+        remove_tree(_WORKER_DIR)
+    remove_unpacked(for_good=True)
+    os._exit(status)
