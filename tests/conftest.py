@@ -11,9 +11,17 @@ SCENARIOS = ROOT / "scenarios"
 
 def pytest_configure(config) -> None:
     """The FMUs the tests load unpack into a cache of this test run (crankfmu.fmu.archive), not
-    the user's; the processes the tests start inherit it (xdist's workers: the controller's)."""
+    the user's; the processes the tests start inherit it (xdist's workers: the controller's).
+
+    OpenBLAS runs on one thread (unless OPENBLAS_NUM_THREADS says otherwise), set before numpy
+    loads it, for this process and every process the tests start: the tests' matrices are a
+    few rows (a Rotor's exact step, the oscillator's exact solution), and on a busy machine
+    OpenBLAS's second thread made a 5 x 5 expm take 8 ms of CPU instead of 0.015 ms (waiting
+    for a thread the scheduler had not run; test_masters.py: 8.4 s of CPU, 1.4 s on one)."""
     import os
     import tempfile
+
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     if "CRANKFMU_CACHE_DIR" not in os.environ:
         os.environ["CRANKFMU_CACHE_DIR"] = config._crankfmu_cache = tempfile.mkdtemp(
             prefix="crankfmu-test-fmus-")
@@ -21,8 +29,10 @@ def pytest_configure(config) -> None:
 
 def pytest_unconfigure(config) -> None:
     import shutil
-    if getattr(config, "_crankfmu_cache", None):
-        shutil.rmtree(config._crankfmu_cache, ignore_errors=True)
+    for folder in (getattr(config, "_crankfmu_cache", None),
+                   getattr(config, "_crankfmu_catalog", None)):
+        if folder:
+            shutil.rmtree(folder, ignore_errors=True)
 
 
 def pytest_sessionstart(session) -> None:
@@ -30,40 +40,74 @@ def pytest_sessionstart(session) -> None:
     per worker), the controller brings the repository's fmus/ up to date before the workers
     start. Scenes run without --fmus build their FMUs there on first use: two workers meeting a
     missing FMU at once would both build it (each renames its own whole file over the target,
-    so readers are safe, but the work is done twice). Serially nothing changes: the first test
-    that needs an FMU builds it."""
+    so readers are safe, but the work is done twice). It also builds the session's catalog
+    (fmu_dir, fmi3_dir) once for every worker (each worker built its own: 4 s of CPU each).
+    Serially nothing changes: the first test that needs an FMU builds it."""
     config = session.config
     if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
         return
-    from crankfmu.fmu.build import build_fmu, rebuild_reason
+    import contextlib
+    import io
+    import tempfile
+
+    from crankfmu.fmu.build import build_all, build_fmu, rebuild_reason
+    from crankfmu.fmu.build_fmi3 import build_all3
     from crankfmu.models.catalog import FMU_MODELS
 
     for model in FMU_MODELS:
         if rebuild_reason(ROOT / "fmus" / f"{model}.fmu", model) is not None:  # as resolve_fmu
             build_fmu(model, ROOT / "fmus")
+    config._crankfmu_catalog = tempfile.mkdtemp(prefix="crankfmu-test-catalog-")
+    said = io.StringIO()  # a line per FMU, shown only if the build or a check fails
+    try:
+        with contextlib.redirect_stdout(said):
+            build_all(Path(config._crankfmu_catalog))
+            build_all3(Path(config._crankfmu_catalog))
+    except BaseException:
+        print(said.getvalue())
+        raise
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_configure_node(node) -> None:
+    """pytest-xdist, in the controller: each worker gets the folder of the session's catalog."""
+    node.workerinput["crankfmu_catalog"] = getattr(node.config, "_crankfmu_catalog", None)
+
+
+def _controller_catalog(config) -> Path | None:
+    """The controller's catalog (pytest_sessionstart) in an xdist worker, else None."""
+    built = getattr(config, "workerinput", {}).get("crankfmu_catalog")
+    return Path(built) if built else None
 
 
 @pytest.fixture(scope="session")
-def fmu_dir(tmp_path_factory) -> Path:
+def fmu_dir(request, tmp_path_factory) -> Path:
     """Every FMU of the catalog, built once for the session and checked with fmpy validate
-    (2 s; the test modules used to build their own, 17 builds of up to 9 FMUs). Tests only read
-    these files: a test that needs other builds makes them in its own folder."""
+    (the test modules used to build their own, 17 builds of up to 9 FMUs): the controller's
+    with pytest-xdist, else built here. Tests only read these files: a test that needs other
+    builds makes them in its own folder."""
     from crankfmu.fmu.build import build_all
 
+    built = _controller_catalog(request.config)
+    if built:
+        return built
     dest = tmp_path_factory.mktemp("fmus")
     build_all(dest)
     return dest
 
 
 @pytest.fixture(scope="session")
-def fmi3_dir(tmp_path_factory) -> Path:
+def fmi3_dir(request, tmp_path_factory) -> Path:
     """Every catalog model's FMI 3.0 FMU (Co-Simulation and Model Exchange, default effects),
-    built once for the session and checked with fmpy validate."""
-    from crankfmu.fmu.build_fmi3 import build_all3
+    built once for the session and checked with fmpy validate (as fmu_dir)."""
+    from crankfmu.fmu.build_fmi3 import FMI3_DIR, build_all3
 
+    built = _controller_catalog(request.config)
+    if built:
+        return built / FMI3_DIR
     dest = tmp_path_factory.mktemp("fmus")
     build_all3(dest)
-    return dest / "fmi3"
+    return dest / FMI3_DIR
 
 
 @pytest.fixture(scope="session")
