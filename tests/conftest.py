@@ -110,6 +110,44 @@ def fmi3_dir(request, tmp_path_factory) -> Path:
     return dest / FMI3_DIR
 
 
+# -- pytest-xdist: which worker runs what, and in which order ------------------------------------
+# Files that share what a support module computes once run on one worker, one after the other.
+SHARED = {"tests/test_papers_figures.py": "papers",   # tests/support/papers_data.py
+          "tests/test_papers_claims.py": "papers"}
+# The longest units first (a file, or the files of a SHARED name): the short ones then fill the
+# end, and the two workers finish together. Seconds of one worker, measured serially: ...
+LONGEST_FIRST = ["tests/test_sweep.py", "papers", "tests/test_fmi3.py"]
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """--dist loadfile (pyproject.toml) with the files of a SHARED name as one unit, and the
+    units in the order of LONGEST_FIRST, then by number of tests (xdist's own order). (The
+    xdist_group marks of --dist loadgroup are lost with pytest 9.2 and pytest-xdist 3.8: the
+    worker renames item._nodeid, which pytest 9 no longer reads.)"""
+    if config.getvalue("dist") != "loadfile":
+        return None
+    from xdist.scheduler import LoadFileScheduling
+
+    class SharedFilesLongestFirst(LoadFileScheduling):
+        ordered = False
+
+        def _split_scope(self, nodeid: str) -> str:
+            file = super()._split_scope(nodeid)
+            return SHARED.get(file, file)
+
+        def _assign_work_unit(self, node) -> None:
+            if not self.ordered:  # the queue is complete before the first unit is assigned
+                rank = {unit: k for k, unit in enumerate(LONGEST_FIRST)}
+                self.workqueue = type(self.workqueue)(sorted(
+                    self.workqueue.items(),
+                    key=lambda unit: (rank.get(unit[0], len(rank)), -len(unit[1]))))
+                self.ordered = True
+            super()._assign_work_unit(node)
+
+    return SharedFilesLongestFirst(config, log)
+
+
 @pytest.fixture(scope="session")
 def catalog(fmu_dir) -> dict[str, Path]:
     """model name -> the session's FMU file (new models are picked up automatically)."""
