@@ -167,7 +167,7 @@ def worker(args) -> None:
 def reference(scene):
     """The monolithic reference (`crankfmu reference`: the scene's physics models as one ODE,
     scipy at rtol 1e-10) on the scene's record grid."""
-    from crankfmu.reference import solve_reference
+    from crankfmu.monolithic import solve_reference
     rec = solve_reference(scene, rtol=1e-10).recorder
     return rec.rows[:, 0], {n: rec.column(n) for n in rec.names}
 

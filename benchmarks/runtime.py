@@ -273,8 +273,8 @@ def part_d(out: Path, target: float = 1e-4) -> None:
     from crankfmu.studies.accuracy import make_metric
     from crankfmu.studies.accuracy.sweep import load_or_solve_reference
     from crankfmu.cosim.runner import RunOptions, run_scene
-    from crankfmu.reference.composed import ComposedModel
-    from crankfmu.reference.solve import RecordMap, record_times
+    from crankfmu.monolithic.composed import ComposedModel
+    from crankfmu.monolithic.solve import RecordMap, record_times
     from crankfmu.system.load import load_scene
 
     scene = load_scene(SERVO_PRESS)

@@ -22,6 +22,8 @@ import sys
 import time
 from pathlib import Path
 
+from crankfmu.masters import traits
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -45,7 +47,7 @@ def cheapest_offline(runs: Path, target: float):
     for path in runs.glob("*.outcome.json"):
         o = json.loads(path.read_text())["outcome"]
         s = o["setting"]
-        if s[0] == "adaptive" and not any(abs(s[4] / t - 1) < 1e-9 for t in SWEEP_TOLERANCES):
+        if traits(s[0]).variable_step and not any(abs(s[4] / t - 1) < 1e-9 for t in SWEEP_TOLERANCES):
             continue
         if o["status"] == "completed" and o["error"] is not None and o["error"] <= target:
             if best is None or o["wall_seconds"] < best["wall_seconds"]:
@@ -106,8 +108,9 @@ def main(argv=None) -> int:
             best_text, best_wall = "none in the sweep", float("nan")
             if best is not None:
                 s = best["setting"]
-                knob = f"tol {s[4]:g}" if s[0] == "adaptive" else f"h {s[2]:g}"
-                best_text = f"{s[0]} x{s[1]} {knob} ({best['error']:.1e})"
+                knob = f"tol {s[4]:g}" if traits(s[0]).variable_step else f"h {s[2]:g}"
+                coupling = f"t{s[5]}" if len(s) > 5 and s[5] else f"x{s[1]}"
+                best_text = f"{s[0]} {coupling} {knob} ({best['error']:.1e})"
                 best_wall = timed_run(scene, s, fmu_dir)
             walls, found = [], None
             for jobs in jobs_list:  # the same runs and choice whatever jobs is (bit-identical)
@@ -126,11 +129,12 @@ def main(argv=None) -> int:
             result, report = found
             err, why = true_error(scene, metric, result, ref)
             m = result.metadata["master"]
-            knob = f"tol {m['tolerance']:g}" if m["algorithm"] == "adaptive" else \
+            knob = f"tol {m['tolerance']:g}" if traits(m["algorithm"]).variable_step else \
                 f"h {m['step']:g}"
-            summed = sum(r[4] for r in report.runs)
+            summed = sum(r[-1] for r in report.runs)
+            coupling = f"t{m['taylor']}" if m.get("taylor") else f"x{m['extrapolation']}"
             lines.append(
-                f"| {scene.name} | {target:g} | {m['algorithm']} x{m['extrapolation']} {knob} | "
+                f"| {scene.name} | {target:g} | {m['algorithm']} {coupling} {knob} | "
                 f"{report.estimate.error:.1e} | {err:.1e}{' ' + why if why else ''} | "
                 f"{'yes' if err <= target else 'NO'} | {len(report.runs)} ({summed:.2f}) | "
                 f"{best_text} | {best_wall:.2f} | {timing} |")

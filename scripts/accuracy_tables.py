@@ -1,15 +1,17 @@
-"""The accuracy tables of the README: `crankfmu accuracy` with its default grid on every scene.
+"""The tables of docs/accuracy_tables.md: `crankfmu accuracy` with its default grid on every scene.
 
     PYTHONPATH=sources python scripts/accuracy_tables.py [--out results/accuracy_tables]
         [--jobs 2] [--scenes hammer,servo_press] [--markdown docs/accuracy_tables.md]
 
 Per scene, over the default grid of `crankfmu accuracy` extended to steps of 8, 16 and 32 x the
-scene's step (where masters become unstable): the metric it is judged by ([analysis], README
-"Accuracy"), the cheapest setting in wall time for an error of 1e-3 and of 1e-5 (with its
+scene's step (where masters become unstable): the metric it is judged by ([analysis],
+docs/accuracy.md), the cheapest setting in wall time for an error of 1e-3 and of 1e-5 (with its
 doStep calls: timing-free), the observed order per master and extrapolation (and per event
-figure), and where a master becomes unstable (error above 1 or a stopped run). Each scene's sweep keeps its runs in OUT/<scene>/runs, so an interrupted run of
-this script resumes. Writes the markdown to --markdown and copies the work-precision plots of
-the scenes in PLOTS to docs/img/<scene>_work_precision.png.
+figure), and where a master becomes unstable (error above 1 or a stopped run). Each scene's
+sweep keeps its runs in OUT/<scene>/runs, so an interrupted run of this script resumes. Writes
+the markdown below the mark of --markdown (the text above it is kept, the tables stamped with
+the command, date and machine: scripts/generated_page.py) and copies the work-precision plots
+of the scenes in PLOTS to docs/img/<scene>_work_precision.png.
 """
 from __future__ import annotations
 
@@ -20,8 +22,10 @@ import sys
 import time
 from pathlib import Path
 
+from generated_page import write_generated  # scripts/, beside this file
+
 ROOT = Path(__file__).resolve().parents[1]
-PLOTS = ("planetary_engagement", "hammer")  # the servo press plot is the README's 1 s sweep
+PLOTS = ("planetary_engagement", "hammer")  # the servo press plot is docs/accuracy.md's 1 s sweep
 TARGETS = (1e-3, 1e-5)
 # x the scene's step: the default grid (4, 2, 1, 0.5) and coarser steps, to show where each
 # master becomes unstable (the coarse runs are cheap; the reference grid stays the same)
@@ -49,7 +53,8 @@ def main(argv=None) -> int:
         print(f"== {scene.name}", flush=True)
         steps = [f * scene.master.step for f in STEP_FACTORS]
         result = run_accuracy(scene, AccuracyOptions(out_dir=args.out / scene.name, steps=steps,
-                                                     jobs=args.jobs, progress=False))
+                                                     jobs=args.jobs, progress=False,
+                                                     plot=scene.name in PLOTS))
         wall = time.perf_counter() - t0
         sections.append(section(scene, result, [cheapest(result.outcomes, t) for t in TARGETS],
                                 wall))
@@ -58,7 +63,7 @@ def main(argv=None) -> int:
             images = ROOT / "docs" / "img"
             images.mkdir(parents=True, exist_ok=True)
             shutil.copy(result.png, images / f"{scene.name}_work_precision.png")
-    args.markdown.write_text("\n\n".join(sections) + "\n")
+    write_generated(args.markdown, "\n\n".join(sections) + "\n", "scripts/accuracy_tables.py")
     print(f"wrote {args.markdown}")
     return 0
 
@@ -68,7 +73,7 @@ def setting_text(o) -> str:
         return "none of the runs"
     s = o.setting
     knob = f"tol {s.tolerance:g}" if o.knob == "tolerance" else f"h {s.step:g} s"
-    return (f"{s.algorithm}, extrapolation {s.extrapolation}, {knob}: error {o.error:.1e}, "
+    return (f"{s.algorithm}, {s.coupling}, {knob}: error {o.error:.1e}, "
             f"{o.wall_seconds:.2f} s, {o.do_steps} doSteps")
 
 
@@ -85,12 +90,12 @@ def section(scene, result, best, wall: float) -> str:
              "",
              "| | cheapest setting (wall time) |", "|---|---|"]
     lines += [f"| error <= {t:g} | {setting_text(o)} |" for t, o in zip(TARGETS, best)]
-    lines += ["", "| master | extrapolation | observed order | unstable (error > 1 or stopped); "
+    lines += ["", "| master | coupling | observed order | unstable (error > 1 or stopped); "
               "event count differs from the reference |",
               "|---|---|---|---|"]
-    for (alg, ex, _ft), (order, used, knob) in result.orders.items():
+    for (alg, coupling, _ft), (order, used, knob) in result.orders.items():
         group = [o for o in result.outcomes
-                 if (o.setting.algorithm, o.setting.extrapolation) == (alg, ex)]
+                 if (o.setting.algorithm, o.setting.coupling) == (alg, coupling)]
         bad = sorted(o.knob_value for o in group if o.unstable)
         order_text = f"{order:.2f} (vs {knob}, {used} pts)" if math.isfinite(order) else \
             f"n/a ({used} pts above the floor)"
@@ -102,7 +107,7 @@ def section(scene, result, best, wall: float) -> str:
                  if not o.ok and not o.unstable and not o.events_differ]
         if other:
             where += f" (other: {', '.join(sorted(set(other)))})"
-        lines.append(f"| {alg} | {ex} | {order_text} | {where} |")
+        lines.append(f"| {alg} | {coupling} | {order_text} | {where} |")
     if result.metric.name == "events":
         lines += ["", event_order_table(result)]
     return "\n".join(lines)
@@ -118,17 +123,17 @@ def event_order_table(result) -> str:
     from crankfmu.studies.accuracy import observed_order
 
     labels = [s.label for s in result.metric.events]
-    lines = ["| master | extrapolation | " + " | ".join(f"order of {lb}" for lb in labels) + " |",
+    lines = ["| master | coupling | " + " | ".join(f"order of {lb}" for lb in labels) + " |",
              "|---|---|" + "---|" * len(labels)]
-    for alg, ex, _ft in result.orders:
+    for alg, coupling, _ft in result.orders:
         group = [o for o in result.outcomes if o.ok and o.extra.get("events")
-                 and (o.setting.algorithm, o.setting.extrapolation) == (alg, ex)]
+                 and (o.setting.algorithm, o.setting.coupling) == (alg, coupling)]
         cells = []
         for label in labels:
             order, used = observed_order([o.knob_value for o in group],
                                          [o.extra["events"][label] for o in group], EVENT_FLOOR)
             cells.append(f"{order:.2f}" if math.isfinite(order) else "n/a")
-        lines.append(f"| {alg} | {ex} | " + " | ".join(cells) + " |")
+        lines.append(f"| {alg} | {coupling} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 

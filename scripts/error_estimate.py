@@ -25,6 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
+from crankfmu.masters import traits
+from generated_page import write_generated  # scripts/, beside this file
+
 ROOT = Path(__file__).resolve().parents[1]
 FACTORS = (4.0, 2.0, 1.0, 0.5)     # the default sweep: x the scene's step
 TOLERANCES = (1e-2, 1e-3, 1e-4)    # the default sweep of the adaptive master
@@ -86,7 +89,7 @@ def run_fine_companions(scene, companions: Path, jobs: int) -> None:
 
 def rows_for_scene(scene, out: Path, jobs: int):
     """Per default-sweep run: (setting, true error, {variant: Estimate or None}, status)."""
-    from crankfmu.cosim.estimate import RATIO_TOLERANCE, coarse_bounds, nominal_order, richardson
+    from crankfmu.cosim.estimate import RATIO_TOLERANCE, coarse_bounds, order_rule, richardson
     from crankfmu.masters import MASTERS
     from crankfmu.studies.accuracy import Setting
 
@@ -95,11 +98,12 @@ def rows_for_scene(scene, out: Path, jobs: int):
     rows, adaptive_companions = [], []
     for alg in MASTERS:
         for ex in (0, 1, 2):
-            if alg == "adaptive" and ex == 0:
+            variable = traits(alg).variable_step
+            if variable and ex == 0:
                 continue  # left out of the default grid (studies/accuracy)
-            knobs = TOLERANCES if alg == "adaptive" else [f * m.step for f in FACTORS]
+            knobs = TOLERANCES if variable else [f * m.step for f in FACTORS]
             for x in knobs:
-                if alg == "adaptive":
+                if variable:
                     at = {r: Setting(alg, ex, m.step, m.fmu_tolerance, x * r)
                           for r in (1.0, 1 / RATIO_TOLERANCE, RATIO_TOLERANCE)}
                     adaptive_companions += [at[1 / RATIO_TOLERANCE], at[RATIO_TOLERANCE]]
@@ -120,15 +124,16 @@ def rows_for_scene(scene, out: Path, jobs: int):
             runs = [series[r] for r in rs]
             return None if any(x is None for x in runs) else \
                 richardson(metric, runs, ratio, knob, nominal, bounds)
-        if alg == "adaptive":  # a tenth of the tolerance (crankfmu's), else 10 x (p = 1)
+        if traits(alg).variable_step:  # a tenth of the tolerance (crankfmu's), else 10 x (p = 1)
             finer = est((1.0, 1 / RATIO_TOLERANCE), 1 / RATIO_TOLERANCE, "tolerance", 1.0)
             coarser = est((1.0, RATIO_TOLERANCE), RATIO_TOLERANCE, "tolerance", 1.0)
             variants = {"fine": finer, "bounded": finer, "observed": coarser,
                         "nominal": coarser}
         else:
-            p0 = nominal_order(ex)
+            p0, _ = order_rule(alg, ex)
             variants = {"fine": est((1.0, 0.5), 0.5, "step", p0),
-                        "bounded": est((1.0, 2.0, 4.0), 2.0, "step", p0, coarse_bounds(ex)),
+                        "bounded": est((1.0, 2.0, 4.0), 2.0, "step", p0,
+                                       coarse_bounds(alg, ex)),
                         "observed": est((1.0, 2.0, 4.0), 2.0, "step", p0),
                         "nominal": est((1.0, 2.0), 2.0, "step", p0)}
         table.append((at[1.0], outcome["error"], variants, ""))
@@ -157,7 +162,7 @@ def table(scene, metric, rows) -> tuple[str, dict]:
     counts = {k: 0 for k in ("completed", "above_floor") + VARIANTS +
               tuple(f"{v}_above" for v in VARIANTS) + tuple(f"{v}_measured" for v in VARIANTS)}
     for s, truth, est, status in rows:
-        knob = f"tol {s.tolerance:g}" if s.algorithm == "adaptive" else f"h {s.step:g}"
+        knob = f"tol {s.tolerance:g}" if traits(s.algorithm).variable_step else f"h {s.step:g}"
         if truth is None:
             lines.append(f"| {s.algorithm} | {s.extrapolation} | {knob} | {status} |" +
                          " |" * len(VARIANTS))
@@ -202,7 +207,7 @@ def plot_scene(scene, rows, path: Path) -> None:
         if truth is None:
             continue
         fine = est.get("fine")
-        o = Outcome(s, "tolerance" if s.algorithm == "adaptive" else "step", truth)
+        o = Outcome(s, traits(s.algorithm).knob or "step", truth)
         o.extra["estimated_error"] = fine.error if fine is not None and fine.ok else None
         outcomes.append(o)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -260,7 +265,8 @@ def main(argv=None) -> int:
     summary.append(line("all", total))
     print("\n".join(summary))
     if args.markdown:
-        args.markdown.write_text("\n".join(summary) + "\n\n" + "\n\n".join(sections) + "\n")
+        write_generated(args.markdown, "\n".join(summary) + "\n\n" + "\n\n".join(sections) + "\n",
+                        "scripts/error_estimate.py")
         print(f"wrote {args.markdown}")
     return 0
 

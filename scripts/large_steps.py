@@ -48,7 +48,7 @@ def measure(path: Path, factors, masters) -> list[dict]:
     from crankfmu.cosim.metrics import ReferenceSamples
     from crankfmu.cosim.runner import RunError, RunOptions, run_scene
     from crankfmu.errors import CrankfmuError
-    from crankfmu.reference import solve_reference
+    from crankfmu.monolithic import solve_reference
     from crankfmu.studies.accuracy.sweep import Setting, reference_grid
     from crankfmu.system.load import load_scene
 

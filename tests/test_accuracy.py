@@ -59,12 +59,16 @@ def test_cheapest_setting_meets_the_target_at_least_wall_time():
     assert cheapest(tie, 1e-3).setting.algorithm == "b"
 
 
-def test_orders_group_by_master_and_extrapolation():
+def test_orders_group_by_master_and_coupling():
+    """One order per master, coupling (extrapolation p or Taylor order q) and FMU tolerance."""
     runs = [outcome("jacobi", h, 5.0 * h, 1.0, 1) for h in (4e-3, 2e-3, 1e-3)] + \
-           [outcome("gauss-seidel", h, 7.0 * h ** 2, 1.0, 1) for h in (4e-3, 2e-3, 1e-3)]
+           [outcome("gauss-seidel", h, 7.0 * h ** 2, 1.0, 1) for h in (4e-3, 2e-3, 1e-3)] + \
+           [Outcome(Setting("gauss-seidel", 0, h, 1e-8, 1e-6, taylor=3), "step", 3e6 * h ** 4,
+                    1.0, 1) for h in (4e-3, 2e-3, 1e-3)]
     got = orders(runs, floor_factor=10.0)  # floor 1e-7: every error is above it
-    assert got[("jacobi", 0, 1e-8)][0] == pytest.approx(1.0)
-    assert got[("gauss-seidel", 0, 1e-8)][0] == pytest.approx(2.0)
+    assert got[("jacobi", "extrapolation 0", 1e-8)][0] == pytest.approx(1.0)
+    assert got[("gauss-seidel", "extrapolation 0", 1e-8)][0] == pytest.approx(2.0)
+    assert got[("gauss-seidel", "taylor 3", 1e-8)][0] == pytest.approx(4.0)
 
 
 def synthetic_run(time_scale=1.0, n=20001, t_end=2.0):
@@ -111,22 +115,35 @@ def test_max_metric_and_reference_lookup_off_the_grid():
 
 
 def test_short_servo_press_sweep_writes_table_csv_and_plot(fmu_dir, tmp_path, capsys):
-    """Gauss-Seidel and Jacobi, extrapolation 0, steps 2 and 1 ms over 0.3 s of run-up."""
+    """Gauss-Seidel and Jacobi, extrapolation 0, steps 2 and 1 ms over 0.3 s of run-up. The
+    table is printed once (before: row by row, then again whole), the choice only for --meet
+    (before: "cheapest meeting --target 0.001" always), accuracy.csv's columns without units in
+    their names and accuracy.json with each column's unit (before: step_s, wall_s)."""
+    import json
+
     from crankfmu.cli import main
+    from crankfmu.studies.accuracy.report import TABLE_HEAD
     from crankfmu.system.load import load_scene
 
     out = tmp_path / "acc"
-    assert main(["accuracy", str(SCENARIOS / "servo_press.toml"), "--stop-time", "0.3",
-                 "--algorithms", "gauss-seidel,jacobi", "--extrapolations", "0",
-                 "--steps", "2e-3,1e-3", "--target", "1e-2", "--out", str(out),
-                 "--fmus", str(fmu_dir), "--no-progress"]) == 0
+    command = ["accuracy", str(SCENARIOS / "servo_press.toml"), "--stop-time", "0.3",
+               "--algorithms", "gauss-seidel,jacobi", "--extrapolations", "0",
+               "--steps", "2e-3,1e-3", "--out", str(out), "--fmus", str(fmu_dir),
+               "--no-progress"]
+    assert main(command + ["--meet", "1e-2", "--plot"]) == 0
     text = capsys.readouterr().out
-    assert "observed order" in text and "cheapest in wall time meeting --target 0.01" in text
+    assert "observed order" in text and "cheapest in wall time meeting --meet 0.01" in text
+    assert text.count(TABLE_HEAD) == 1
     rows = list(csv.DictReader(open(out / "accuracy.csv")))
-    assert [(r["algorithm"], float(r["step_s"])) for r in rows] == [
+    assert [(r["algorithm"], float(r["step"])) for r in rows] == [
         ("gauss-seidel", 2e-3), ("gauss-seidel", 1e-3), ("jacobi", 2e-3), ("jacobi", 1e-3)]
     assert all(r["status"] == "completed" for r in rows)
-    err = {(r["algorithm"], float(r["step_s"])): float(r["error"]) for r in rows}
+    side = json.loads((out / "accuracy.json").read_text())
+    assert side["units"] == {c: side["units"][c] for c in rows[0]}  # every column, in order
+    assert (side["units"]["step"], side["units"]["wall_time"], side["units"]["error"]) == \
+        ("s", "s", "1") and side["metric"] == "max" == rows[0]["metric"]
+    assert not [c for c in rows[0] if "_s" in c[-2:] or "[" in c]
+    err = {(r["algorithm"], float(r["step"])): float(r["error"]) for r in rows}
     # a finer step is more accurate with either master, and the reference is not the run
     for alg in ("gauss-seidel", "jacobi"):
         assert 0.0 < err[(alg, 1e-3)] < err[(alg, 2e-3)]
@@ -138,6 +155,9 @@ def test_short_servo_press_sweep_writes_table_csv_and_plot(fmu_dir, tmp_path, ca
     grid = np.loadtxt(out / "reference.csv", delimiter=",", skiprows=1)[:, 0]
     _, _, cached = load_or_solve_reference(scene, grid, out, 1e-10, progress=False)
     assert cached
+    assert main(command) == 0  # kept runs: no choice asked for, none printed
+    text = capsys.readouterr().out
+    assert "meeting" not in text and text.count(TABLE_HEAD) == 1
 
 
 @pytest.mark.parametrize("option, message", [

@@ -25,11 +25,11 @@ def hybrid_fmus(fmu_dir):
 
 @pytest.fixture(scope="module")
 def one_worker():
-    """The executor the default jobs=1 makes (a local pool of one spawned worker), kept for the
-    module instead of a fresh interpreter for every study."""
-    from crankfmu.studies.executor import LocalPoolExecutor
-    with LocalPoolExecutor(1) as pool:
-        yield pool
+    """The executor the default jobs=1 makes (every run in this process), kept for the
+    module."""
+    from crankfmu.studies.executor import make_executor
+    with make_executor(1) as executor:
+        yield executor
 
 
 # -- the figures, on hand-made columns (exact values known) -------------------------------------
@@ -78,7 +78,7 @@ def test_shipped_scenes_name_their_metric():
         scene = load_scene(SCENARIOS / f"{name}.toml")
         assert scene_metric_name(scene) == metric, name
         for spec in scene_event_specs(scene):  # every named figure exists in the model
-            from crankfmu.reference.composed import ComposedModel
+            from crankfmu.monolithic.composed import ComposedModel
             model = ComposedModel(scene)
             for ref in spec.needs:
                 comp, var = ref.split(".", 1)
@@ -108,7 +108,7 @@ def planetary(tmp_path, fmus, executor, steps, **options):
 
 def test_planetary_lock_time_converges_first_order(tmp_path, hybrid_fmus, one_worker):
     """Gauss-Seidel with the held motor torque: the lock-time error is first order in the step
-    (README). Slope between 4e-4 and 2e-4 s within 0.8-1.2: measured 1.00."""
+    (docs/accuracy.md). Slope between 4e-4 and 2e-4 s within 0.8-1.2: measured 1.00."""
     result = planetary(tmp_path, hybrid_fmus, one_worker, [4e-4, 2e-4])
     lock = [o.extra["events"]["drive.t_lock_b at end"] for o in result.outcomes]
     assert all(o.status == "completed" for o in result.outcomes)
@@ -165,7 +165,7 @@ def test_unstable_runs_are_reported_as_such():
     """A run whose error exceeds 1 or that stopped is 'unstable', never a number in the table
     or the CSV (the figure or the reason goes into the status)."""
     from crankfmu.cosim.metrics import ReferenceSamples, make_metric
-    from crankfmu.studies.accuracy.report import _row, format_outcome
+    from crankfmu.studies.accuracy.report import format_outcome, table_row
     from crankfmu.studies.accuracy.sweep import _outcome
     from crankfmu.studies.executor import RunOutput, RunTask
 
@@ -182,16 +182,16 @@ def test_unstable_runs_are_reported_as_such():
         stopped = RunOutput(0, "failed", reason="master: state not finite at t = 0.4 s")
         s = _outcome(setting, stopped, RunTask(0, None), metric, ref, Path(tmp), {})
     assert o.status == "unstable: error 3 > 1" and not o.ok
-    assert "unstable" in format_outcome(o) and _row(o)[5] == "unstable"
+    assert "unstable" in format_outcome(o) and table_row(o, "max")["error"] == "unstable"
     assert s.status.startswith("unstable (stopped): master: state not finite")
-    assert not s.ok and _row(s)[5] == "unstable"
+    assert not s.ok and table_row(s, "max")["error"] == "unstable"
 
 
 def test_a_run_with_an_extra_blow_says_so(tmp_path):
     """A blow more than the reference by the stop time: 'events differ', no number, not
     'unstable' (the run is stable; its blows drifted)."""
     from crankfmu.cosim.metrics import ReferenceSamples, make_metric
-    from crankfmu.studies.accuracy.report import _row
+    from crankfmu.studies.accuracy.report import table_row
     from crankfmu.studies.accuracy.sweep import _outcome
     from crankfmu.studies.executor import RunOutput, RunTask
 
@@ -205,4 +205,4 @@ def test_a_run_with_an_extra_blow_says_so(tmp_path):
     o = _outcome(Setting("jacobi", 0, 4e-3, 1e-8, 1e-6), output, RunTask(0, None), metric, ref,
                  tmp_path, {})
     assert o.status == "events differ: h.n: 3 events in the run, 2 in the reference"
-    assert o.events_differ and not o.unstable and not o.ok and _row(o)[5] == "events differ"
+    assert o.events_differ and not o.unstable and not o.ok and table_row(o, "events")["error"] == "events differ"

@@ -1,4 +1,4 @@
-"""Adding a model is one folder plus one registration line (README, "Adding a model").
+"""Adding a model is one folder plus one registration line (docs/models.md, "Adding a model").
 
 The example folder tests/examples/flywheel is put into a copy of the package, with one line in
 models/catalog.py; a fresh interpreter on that copy builds its FMU and runs
@@ -30,7 +30,7 @@ def package_with_the_example(tmp: Path) -> Path:
     catalog = package / "models" / "catalog.py"
     head = "FMU_MODELS: dict[str, str] = {\n"
     text = catalog.read_text()
-    assert head in text, "the registry moved: update this test and the README walk-through"
+    assert head in text, "the registry moved: update this test and docs/models.md"
     catalog.write_text(text.replace(head, head + REGISTRATION))
     return package
 

@@ -150,7 +150,7 @@ def test_compare_accuracy_and_sweep_write_only_into_out(tmp_path, monkeypatch, f
     b.name = "with_flywheel"
     b.components["motor"].parameters["J_flywheel"] = 0.1
     cmp = crankfmu.compare(a, b, stop_time=0.7, fmu_dir=fmu_dir)
-    assert "N.m" in cmp["text"] and cmp["csv"] is None
+    assert "N.m" in cmp.text and cmp.csv is None
     acc = crankfmu.accuracy(SERVO, stop_time=0.05, algorithms=["gauss-seidel"],
                             extrapolations=[0], steps=[2e-3], fmu_dir=fmu_dir,
                             reference_rtol=1e-8)
@@ -158,6 +158,17 @@ def test_compare_accuracy_and_sweep_write_only_into_out(tmp_path, monkeypatch, f
     table = crankfmu.sweep(SERVO, ["motor.J_flywheel=0,0.1"], stop_time=0.7, jobs=1,
                            fmu_dir=fmu_dir, progress=False)
     assert len(table) == 2 and table.csv is None
+    # each an object with its units and to_pandas (before: compare gave a dict, none had it)
+    df = cmp.to_pandas()
+    assert df.loc["mean_crank_speed", "unit"] == "rad/s" == df.attrs["units"]["mean_crank_speed"]
+    assert df.loc["strokes", a.name] == cmp.table[0][2]
+    df = acc.to_pandas()
+    assert list(df.columns) == acc.columns and df.attrs["units"]["step"] == "s"
+    assert df["step"].tolist() == [2e-3] and df["error"].tolist() == [acc.outcomes[0].error]
+    df = table.to_pandas()
+    assert df.attrs["units"]["motor.J_flywheel"] == "kg.m2" and \
+        df.attrs["units"]["mean_crank_speed"] == "rad/s"
+    assert df["motor.J_flywheel"].tolist() == [0.0, 0.1]
     # 0.5 to 0.7 s holds no whole revolution: those figures are missing, and the row says why
     assert table.rows[1]["status"] == "figures missing"
     assert table.rows[1]["reason"].startswith("cycle_time, energy_per_stroke: no whole crank "
@@ -183,3 +194,69 @@ def test_inputs_take_a_table_with_its_interpolation_as_a_scene_file_does(servo_s
     for bad in ({"table": [[0.0, 1.0]], "interpolation": "cubic"}, "220", [[0.0, "x"]]):
         with pytest.raises(SceneError, match="motor.u"):
             set_input(servo_scene, "motor.u", bad)
+
+
+NO_GUARD = """
+import sys
+import crankfmu
+print("the script's body ran", flush=True)
+jobs, scene, fmus = int(sys.argv[1]), sys.argv[2], sys.argv[3]
+table = crankfmu.sweep(scene, ["motor.J_flywheel=0,0.1"], stop_time=0.7, jobs=jobs,
+                       fmu_dir=fmus)
+acc = crankfmu.accuracy(scene, stop_time=0.05, algorithms=["jacobi"], extrapolations=[1],
+                        steps=[2e-3], reference_rtol=1e-8, jobs=jobs, fmu_dir=fmus)
+print("done:", len(table), "sweep runs,", len(acc.outcomes), "accuracy runs", flush=True)
+"""
+
+
+def _script(tmp_path, jobs: int, fmu_dir):
+    import subprocess
+
+    from tests.conftest import ROOT
+    script = tmp_path / "study.py"
+    script.write_text(NO_GUARD)
+    env = {**__import__("os").environ, "PYTHONPATH": str(ROOT / "sources")}
+    return subprocess.run([sys.executable, str(script), str(jobs), str(SERVO), str(fmu_dir)],
+                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
+
+
+def test_a_script_without_a_main_guard_runs_once_with_jobs_1(tmp_path, fmu_dir):
+    """Before: crankfmu.sweep and crankfmu.accuracy started a worker pool with jobs=1 too, whose
+    worker imported the script again: its body ran twice and multiprocessing's bootstrapping
+    RuntimeError ended it. jobs=1 now runs in the calling process."""
+    done = _script(tmp_path, 1, fmu_dir)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.count("the script's body ran") == 1
+    assert "done: 2 sweep runs, 1 accuracy runs" in done.stdout
+
+
+def test_a_pool_from_a_script_without_a_main_guard_says_what_to_do(tmp_path, fmu_dir):
+    """With jobs=2 the workers import the script again: crankfmu stops with a WorkerStartError
+    that names the guard (before: multiprocessing's RuntimeError in every worker, and lost
+    runs)."""
+    done = _script(tmp_path, 2, fmu_dir)
+    assert done.returncode == 1 and "done:" not in done.stdout
+    last = done.stderr.strip().splitlines()[-1]
+    assert last.startswith("crankfmu.cosim.companions.WorkerStartError: ") and \
+        'if __name__ == "__main__":' in last, done.stderr[-2000:]
+
+
+def test_the_api_functions_stay_whatever_is_imported():
+    """crankfmu.reference, accuracy, compare and sweep stay the API's functions when every
+    subpackage and module is imported, and the package is a plain module: no subpackage shares
+    their names (before: crankfmu/reference/ did, and the package swapped its module class so
+    that importing it would not replace the function)."""
+    import importlib
+    import pkgutil
+    import types
+
+    import crankfmu
+    for module in pkgutil.iter_modules(crankfmu.__path__, "crankfmu."):
+        if module.name != "crankfmu.__main__":
+            importlib.import_module(module.name)
+    for name in ("crankfmu.studies.accuracy", "crankfmu.studies.compare",
+                 "crankfmu.studies.sweep", "crankfmu.monolithic.solve"):
+        importlib.import_module(name)
+    assert type(crankfmu) is types.ModuleType
+    for name in ("reference", "accuracy", "compare", "sweep"):
+        assert isinstance(getattr(crankfmu, name), types.FunctionType), name

@@ -78,7 +78,7 @@ def test_a_run_that_stops_does_not_wait_for_its_companion(fmu_dir, monkeypatch):
 
     def fail(*args, **kwargs):
         raise runner.RunError("the main run stopped", None)
-    monkeypatch.setattr(runner, "_run", fail)
+    monkeypatch.setattr(runner, "_step", fail)  # the stepping (cosim.runner._step)
     t0 = time.perf_counter()
     with pytest.raises(runner.RunError, match="the main run stopped"):
         run_scene(scene, RunOptions(fmu_dir=fmu_dir, progress=False, estimate=True, jobs=2))

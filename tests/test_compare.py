@@ -1,5 +1,6 @@
 """`[swap]` scenes and `crankfmu compare`: swap resolution, the metrics on signals with known
-answers, and the README example (servo_press vs conventional_press) end to end on short runs."""
+answers, and the docs example (docs/compare.md: servo_press vs conventional_press) end to end on
+short runs."""
 from __future__ import annotations
 
 import csv
@@ -95,7 +96,7 @@ def test_metrics_known_answers():
     assert metrics(still)["strokes"] == 0 and math.isnan(metrics(still)["cycle_time"])
 
 
-# -- the README example, short ------------------------------------------------------------------
+# -- the docs example, short --------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def fmus(fmu_dir):
     return fmu_dir  # the session's catalog (tests/conftest.py)
@@ -106,7 +107,7 @@ def test_compare_command_servo_vs_conventional(fmus, tmp_path, capsys):
     out = tmp_path / "swap"
     assert main(["compare", str(SCENARIOS / "servo_press.toml"),
                  str(SCENARIOS / "conventional_press.toml"), "--out", str(out),
-                 "--stop-time", "1.0", "--fmus", str(fmus), "--no-progress"]) == 0
+                 "--stop-time", "1.0", "--fmus", str(fmus), "--no-progress", "--plot"]) == 0
     text = capsys.readouterr().out
     assert "cycle_time" in text and "energy_per_stroke" in text
     for name in ("compare.csv", "compare.png", "servo_press.csv", "conventional_press.csv"):

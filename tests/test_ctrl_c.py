@@ -46,8 +46,8 @@ def test_ctrl_c_during_the_estimate_companion_keeps_the_run_and_exits_130(tmp_pa
     scene.write_text(rotor(0.05))
     fixed_steps = runner._fixed_steps
 
-    def steps(master, scene, progress):
-        for k, item in enumerate(fixed_steps(master, scene, progress)):
+    def steps(master, scene, progress, label=None):
+        for k, item in enumerate(fixed_steps(master, scene, progress, label)):
             if scene.master.step < 1e-3 and k == 5:  # the companion: half the scene's step
                 os.kill(os.getpid(), signal.SIGINT)
             yield item

@@ -1,5 +1,5 @@
 """An effect that is off changes nothing and costs nothing, for every FMU model that has
-effects (README: "all others are off and cost nothing"; until issue #27 held by a test for the
+effects (README: "the others are off and cost nothing"; until issue #27 held by a test for the
 mill stand's states only).
 
 Each model runs through its FMU step (`PhysicsModel.step`, the call a doStep makes, with the

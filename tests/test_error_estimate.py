@@ -75,6 +75,13 @@ def test_estimate_is_in_the_sidecar(tmp_path, rotor_fmus):
     # one finer companion (h/2) with the design order extrapolation + 1
     assert side["knob"] == "step" and side["ratio"] == 0.5
     assert side["order_source"] == "nominal" and side["order"] == 2.0
+    # the metric it estimates, named (before: a bare number), and so the terminal line
+    assert side["metric"] == "max" and side["metric_description"] == \
+        "max_t |y - y_ref| / mean|y_ref| over r1.flange_w, r2.w"
+    from crankfmu.cosim.estimate import format_estimate
+    assert format_estimate(result.estimate).startswith(
+        f"estimated error {result.estimate.error:.2e} of r1.flange_w, r2.w "
+        "(max_t |y - y_ref| / mean|y_ref|): Richardson from a companion at 0.5 x the step")
 
 
 def test_accuracy_column_matches_the_run_estimate(tmp_path, rotor_fmus):
@@ -86,7 +93,7 @@ def test_accuracy_column_matches_the_run_estimate(tmp_path, rotor_fmus):
                                   "extrapolation": 2}, stop=0.3)
     result = run_accuracy(scene, AccuracyOptions(
         out_dir=tmp_path / "acc", algorithms=["gauss-seidel"], extrapolations=[2],
-        steps=[5e-3], fmu_dir=rotor_fmus, progress=False, jobs=1))
+        steps=[5e-3], fmu_dir=rotor_fmus, progress=False, jobs=1, plot=True))
     with open(result.csv) as f:
         rows = list(csv.DictReader(f))
     assert len(rows) == 1  # the companion (2.5 ms) is not a row of the table
@@ -105,8 +112,8 @@ def test_target_is_met_without_a_reference(tmp_path, rotor_fmus):
     assert sum(line.startswith("run ") for line in progress) == len(report.runs)
     assert progress[-1] == (f"  estimated error at step {report.step:g} s: "
                             f"{report.estimate.error:.2e} (target 0.0001)")
-    chosen = result.metadata["master"]
-    assert (chosen["algorithm"], chosen["extrapolation"]) == ("gauss-seidel", 2)
+    chosen = result.metadata["master"]  # the rotors offer output derivatives: Taylor first
+    assert (chosen["algorithm"], chosen["taylor"]) == ("gauss-seidel", 3)
     # the truth, from the exact solution the search never saw
     assert true_error(scene, result.recorder) <= 1e-4
 

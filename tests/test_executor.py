@@ -61,7 +61,7 @@ def test_compare_on_a_pool_equals_serial(fmu_dir, tmp_path):
     serial = compare_scenes(*scenes(), tmp_path / "serial", options)
     with LocalPoolExecutor(2) as pool:
         parallel = compare_scenes(*scenes(), tmp_path / "pool", options, pool)
-    assert serial["text"] == parallel["text"]
+    assert serial.text == parallel.text
     for name in ("compare.csv", "servo_press.csv", "with_flywheel.csv"):
         assert (tmp_path / "serial" / name).read_bytes() == (tmp_path / "pool" / name).read_bytes()
 
@@ -100,6 +100,15 @@ def test_workers_that_the_pool_ends_remove_their_folders(tmp_path):
         "except Exception as err:\n"
         "    print(type(err).__name__)\n"
         "pool.close()\n"
+        "import time\n"  # the survivor removes its folder on SIGTERM: wait until it has ended
+        "deadline = time.monotonic() + 60\n"
+        "for pid, _ in workers:\n"
+        "    while time.monotonic() < deadline:\n"
+        "        try:\n"
+        "            os.kill(pid, 0)\n"
+        "        except ProcessLookupError:\n"
+        "            break\n"
+        "        time.sleep(0.05)\n"
         "print(workers[0][1])\n")
     done = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True,
                           text=True, timeout=120, env={**os.environ, "TMPDIR": str(tmp_path)})

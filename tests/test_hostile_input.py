@@ -530,7 +530,7 @@ def test_the_step_limit_is_stated_and_can_be_raised(tmp_path, capsys):
     assert status == 2 and "--step: 1e-09 s" in capsys.readouterr().err
     from argparse import Namespace
 
-    from crankfmu.cli import load_with_options
+    from crankfmu.commands.options import load_with_options
     args = Namespace(scene=SCENARIOS / "servo_press.toml", overrides=[], stop_time=None,
                      step=1e-7, tolerance=None, fmu_tolerance=None, algorithm=None,
                      extrapolation=None, max_steps=None)

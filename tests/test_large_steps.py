@@ -1,6 +1,6 @@
 """Large steps: the step and master at which each shipped scene stays stable, and where a run is
-marked unreliable (crankfmu.cosim.trust), as measured by scripts/large_steps.py (README, "When
-a run is marked unreliable"; the accuracy tables give the scenes 8 to 32 x their step).
+marked unreliable (crankfmu.cosim.trust), as measured by scripts/large_steps.py (docs/error_estimate.md,
+"When a run is marked unreliable"; the accuracy tables give the scenes 8 to 32 x their step).
 
 Per scene, with its own master and extrapolation:
 - at its own settings the run is not marked (the limits were chosen so; the largest estimate

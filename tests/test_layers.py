@@ -1,6 +1,6 @@
 """The package's imports point one way (docs/architecture.md opens with the picture):
 
-    runtime <- models <- errors <- fmu <- masters <- system <- cosim <- reference, interop
+    runtime <- models <- errors <- fmu <- masters <- system <- cosim <- monolithic, interop
             <- studies <- commands, cli, api
 
 A module may import its own layer or a lower one, never a higher one, and no set of modules
@@ -18,7 +18,7 @@ import pytest
 PACKAGE = Path(__file__).resolve().parents[1] / "sources" / "crankfmu"
 LAYERS = (("runtime", "version"), ("models",), ("errors", "outputs"), ("fmu",), ("masters",), ("system",),
           ("cosim",),
-          ("reference", "interop"), ("studies",), ("commands", "cli", "api", "__main__", ""))
+          ("monolithic", "interop"), ("studies",), ("commands", "cli", "api", "__main__", ""))
 RANK = {top: rank for rank, tops in enumerate(LAYERS) for top in tops}
 
 
@@ -149,7 +149,7 @@ def test_one_place_maps_errors_to_exit_status_2():
                                   "CompositionError", "SceneError", "OptionError"])
 def test_user_errors_derive_from_the_one_base(name):
     import crankfmu.errors as errors
-    from crankfmu.reference.composed import CompositionError
+    from crankfmu.monolithic.composed import CompositionError
     from crankfmu.cosim.events import EventSpecError
     from crankfmu.cosim.metrics import MetricError
     from crankfmu.studies.structure.description import MechanismError
@@ -158,3 +158,15 @@ def test_user_errors_derive_from_the_one_base(name):
              "EventSpecError": EventSpecError, "MechanismError": MechanismError,
              "SweepError": SweepError}
     assert issubclass(found[name], errors.CrankfmuError)
+
+
+def test_cli_and_the_commands_do_not_import_each_other():
+    """cli.py builds the parser and dispatches, naming each command's module (importlib); the
+    commands take their shared options from commands/options.py. Before: 18 imports between
+    cli.py and commands/, both ways, and run and build lived in cli.py."""
+    both_ways = [f"{m} -> {d}" for m, deps in GRAPH.items() for d in deps
+                 if (m == "cli" and top(d) == "commands") or (top(m) == "commands" and d == "cli")]
+    assert both_ways == []
+    from crankfmu.cli import COMMANDS
+    modules = {m.split(".")[1] for m in MODULES if m.startswith("commands.")}
+    assert set(COMMANDS.values()) == modules - {"options"}

@@ -139,6 +139,24 @@ def test_a_master_redefining_a_key_is_refused():
     assert "clash" not in MASTERS
 
 
+def test_a_master_may_default_a_shared_key_on_its_own(tmp_path):
+    """The adaptive master's tolerance default (1e-2) differs from the shared one (1e-6, the
+    iterative master's): the scene reads the chosen master's, the sidecar's table shows it, and
+    a master whose own default its option would refuse cannot be registered."""
+    scene = load_scene(scene_file(tmp_path, {"algorithm": "adaptive"}, OSCILLATOR, 0.05, None))
+    assert scene.master.tolerance == 1e-2 == scene.master.resolved()["tolerance"]
+    scene.master.algorithm = "iterative"
+    assert scene.master.tolerance == all_options()["tolerance"].default == 1e-6
+
+    class Loose(IteratedGaussSeidel):
+        name = "loose"
+        defaults = {"sweeps": 0}
+
+    with pytest.raises(ValueError, match="master loose: its default sweeps = 0 is not"):
+        register(Loose)
+    assert "loose" not in MASTERS
+
+
 def test_option_checks_name_what_is_allowed():
     step = Option("min_step", float, "s", 1e-6, "smallest step", positive=True)
     for value, words in ((0.0, "must be > 0, got 0.0"), (float("nan"), "must be a finite number"),
@@ -184,9 +202,9 @@ def test_history_rows_extrapolate_a_parabola_exactly():
     history = History()
     for t in (-2e-3, -1e-3, 0.0):
         history.push(t, {"a": np.array([1 + 2 * t + 3 * t * t])})
-    rows = history.rows("a", 0.0, 2)
+    rows = np.asarray(history.rows("a", 0.0, 2))
     assert np.allclose(rows[:, 0], [1.0, 2.0, 6.0], rtol=0, atol=1e-9)
-    assert history.rows("a", 0.0, 0).tolist() == [[1.0]]
+    assert np.asarray(history.rows("a", 0.0, 0)).tolist() == [[1.0]]
 
 
 def test_error_scale_is_the_largest_magnitude_at_least_the_nominal():
@@ -209,13 +227,13 @@ def test_input_feed_gives_a_foreign_fmu_the_held_midpoint_value():
     system = SimpleNamespace(fmus={"f": _fmu("F", inputs=["u"])}, in_names={"f": ["u"]},
                              out_names={"g": ["y"]},
                              in_sources={"f": [("g", 0)]},
-                             write_inputs={"f": lambda v: written.append(v.tolist())})
+                             write_inputs={"f": lambda v: written.append(list(v))})
     feed = InputFeed(system)
     rows = np.array([[1.0], [4.0]])  # u(s) = 1 + 4 s
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         assert feed.write("f", rows) is None
-        assert feed.write_held("f", rows, 0.5).tolist() == [[2.0]]
+        assert feed.write_held("f", rows, 0.5) == [[2.0]]
     assert written == [[2.0]] and len(caught) == 1 and "F.fmu" in str(caught[0].message)
 
 
@@ -238,17 +256,22 @@ def test_port_power_integrates_a_constant_port_exactly():
 
 
 def test_float_paths_give_numpys_floats():
-    """The adaptive master's error and prediction run on Python floats (cheaper for a few
-    values); they must give numpy's floats bit for bit (the scenes' results stay identical),
-    and a NaN must come through as numpy's maximum and max let it."""
-    from crankfmu.masters.adaptive import _evaluate
+    """The masters' per-step arithmetic runs on Python floats (cheaper for a few values): the
+    input polynomial's value and the error scale must give the floats of their numpy form bit
+    for bit (the scenes' results stay identical), and a NaN must come through as numpy's
+    maximum and max let it."""
     from crankfmu.masters.history import evaluate
 
     rng = np.random.default_rng(3)
     for depth in (1, 2, 3):
         rows = rng.normal(size=(depth, 4)) * 10.0 ** rng.integers(-8, 8, size=(depth, 4))
         for s in (1e-3, 0.37, 2.5e-6):
-            assert _evaluate(rows.tolist(), s) == evaluate(rows, s).tolist()
+            numpy_form = rows[0].copy()
+            if depth > 1:
+                numpy_form += rows[1] * s
+            if depth > 2:
+                numpy_form += rows[2] * (0.5 * s * s)
+            assert evaluate(rows.tolist(), s) == numpy_form.tolist()
     system = SimpleNamespace(outputs={"a": np.zeros(4)}, out_names={"a": list("wxyz")},
                              fmus={"a": SimpleNamespace(variables={
                                  n: SimpleNamespace(nominal=nom) for n, nom in

@@ -159,6 +159,38 @@ def test_adaptive_master_meets_tolerance_with_fewer_steps(tmp_path, rotor_fmus):
     assert speed_error(fixed, damped) > 2 * error
 
 
+def test_adaptive_master_with_its_defaults_runs_the_servo_press_in_reachable_steps(fmu_dir):
+    """`crankfmu run scenarios/servo_press.toml --algorithm adaptive`: the scene's
+    extrapolation 0 (held inputs) and the adaptive master's defaults. With held inputs its error
+    estimate is each output's change over the step, first order in h; the shared default
+    tolerance 1e-6 (the iterative master's interface convergence) asked for steps below
+    min_step: 300,000 steps of 1 us for 0.3 s, every one accepted above tolerance. With the
+    adaptive master's own default (1e-2): at most 3,000 steps for 0.3 s (measured 1,100), none
+    above tolerance, and the crank speed within the tolerance of the hand-built monolithic
+    solution (scipy, rtol 1e-10; max |w - w_ref| / mean |w_ref|, measured 6e-4: the tolerance
+    bounds each step's input error relative to the signal's scale, and the global error is
+    that size or smaller, as in the test above)."""
+    from tests.conftest import SCENARIOS
+    from tests.support.servo_press_monolithic import MonolithicServoPress
+
+    scene = load_scene(SCENARIOS / "servo_press.toml")
+    scene.master.algorithm, scene.stop_time = "adaptive", 0.3
+    assert "tolerance" not in scene.master.options and scene.master.extrapolation == 0
+    result = run_scene(scene, RunOptions(fmu_dir=fmu_dir, progress=False))
+    stats, tolerance = result.master_statistics, result.metadata["master"]["tolerance"]
+    assert stats["accepted_steps"] + stats["rejected_steps"] <= 3000, stats
+    assert stats["accepted_above_tolerance"] == 0, stats
+    hand = MonolithicServoPress(motor_effects=("electrical_lag",))
+    times = result.recorder.rows[:, 0]
+    w_ref = hand.simulate(hand.initial_state(), 0.0, 2)(times)[1]
+    error = np.max(np.abs(result.recorder.column("press.w_crank") - w_ref)) / np.mean(
+        np.abs(w_ref))
+    print(f"\nservo press 0.3 s, adaptive defaults (tolerance {tolerance:g}): "
+          f"{stats['accepted_steps']} steps ({stats['rejected_steps']} rejected), crank speed "
+          f"error {error:.1e}")
+    assert error < tolerance
+
+
 STIFF = dict(OSCILLATOR, J2=0.01, k=1e5, ds=0.0, w10=1.0)  # w_max = 3178 rad/s, w h = 3.2
 
 
@@ -233,7 +265,8 @@ def test_cli_run_prints_coupling_error(tmp_path, rotor_fmus, capsys):
                  "--no-progress"])
     out = capsys.readouterr().out
     assert code == 0
-    assert "with adaptive (extrapolation 1, tolerance 0.001, min_step 1e-06, max_step 0.01)" \
+    assert "with adaptive (extrapolation 1, taylor 0, tolerance 0.001, min_step 1e-06, max_step "\
+           "0.01)" \
         in out and "accepted_steps" in out
     assert "coupling error at r2 -> r1: energy mismatch" in out
 
@@ -261,4 +294,4 @@ def test_taylor_rows_hold_a_constant_exactly():
     from crankfmu.masters.base import taylor_rows
 
     rows = taylor_rows((0.0, -1e-3, -2e-3), np.array([[0.05, 572.0]] * 3))
-    assert rows[0].tolist() == [0.05, 572.0] and not np.any(rows[1:])
+    assert rows[0] == [0.05, 572.0] and not np.any(rows[1:])

@@ -43,8 +43,8 @@ def no_computation(monkeypatch):
     from crankfmu.cosim import runner
     from crankfmu.system import ssp_export
     monkeypatch.setattr(runner, "load_fmus", computed)
-    from crankfmu.reference import solve_reference  # noqa: F401 - the subpackage, loaded
-    monkeypatch.setattr(sys.modules["crankfmu.reference"], "solve_reference", computed)
+    from crankfmu.monolithic import solve_reference  # noqa: F401 - the subpackage, loaded
+    monkeypatch.setattr(sys.modules["crankfmu.monolithic"], "solve_reference", computed)
     monkeypatch.setattr(crankfmu.studies.executor, "prepare_tasks", computed)
     monkeypatch.setattr(crankfmu.studies.accuracy, "load_or_solve_reference", computed)
     monkeypatch.setattr(crankfmu.studies.compare, "run_for_comparison", computed)

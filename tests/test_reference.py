@@ -14,7 +14,7 @@ import pytest
 from scipy.linalg import expm
 
 from crankfmu.models.catalog import physics_class
-from crankfmu.reference import ComposedModel, CompositionError, record_times, solve_reference
+from crankfmu.monolithic import ComposedModel, CompositionError, record_times, solve_reference
 from crankfmu.system.load import load_scene
 from crankfmu.system.scene import SceneError, parse_scene
 
@@ -182,7 +182,7 @@ def test_models_that_integrate_themselves_are_refused_by_name():
     on_input_change without declaring the contract, is refused; the shipped hybrid models
     declare it (advance_follows_contract) and compose (tests/test_reference_hybrid.py)."""
     from crankfmu.runtime.model import PhysicsModel
-    from crankfmu.reference.composed import _check_composable
+    from crankfmu.monolithic.composed import _check_composable
 
     class Opaque(PhysicsModel):
         model_name = "Opaque"

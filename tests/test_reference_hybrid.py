@@ -1,4 +1,4 @@
-"""The monolithic reference of the hybrid and rigidly coupled scenes (reference/composed.py
+"""The monolithic reference of the hybrid and rigidly coupled scenes (monolithic/composed.py
 composing the models through their hybrid contract) against independent solutions.
 
 * Planetary engagement and stopping (Kloss motor law): the lock time and the braked member's
@@ -32,8 +32,8 @@ from tests.conftest import SCENARIOS
 from crankfmu.models.induction_motor.induction_motor import InductionMotor
 from crankfmu.models.planetary_drive.planetary_drive import PlanetaryClutchDrive, steady_state
 from crankfmu.models.rocker_impact.rocker_linear import exact_linear
-from crankfmu.reference import solve_reference
-from crankfmu.reference.composed import ComposedModel
+from crankfmu.monolithic import solve_reference
+from crankfmu.monolithic.composed import ComposedModel
 from crankfmu.system.load import load_scene
 
 STOP = 0.3  # s: both planetary locks happen before 0.24 s

@@ -40,11 +40,11 @@ def rotor_fmu_dir(fmu_dir):
 
 @pytest.fixture(scope="module")
 def one_worker():
-    """The executor `jobs=1` makes (a local pool of one spawned worker), kept for the module:
-    its runs are those of jobs=1, without starting a fresh interpreter for every sweep."""
-    from crankfmu.studies.executor import LocalPoolExecutor
-    with LocalPoolExecutor(1) as pool:
-        yield pool
+    """The executor `jobs=1` makes (every run in this process), kept for the module."""
+    from crankfmu.studies.executor import InProcessExecutor, make_executor
+    with make_executor(1) as executor:
+        assert isinstance(executor, InProcessExecutor)
+        yield executor
 
 
 def spinner(tmp_path: Path, stop: float = 1.0) -> Path:
@@ -87,7 +87,7 @@ def same_rows(columns, rows_a, rows_b) -> None:
     assert len(rows_a) == len(rows_b)
     for ra, rb in zip(rows_a, rows_b):
         for c in columns:
-            if c == "wall_seconds":
+            if c == "wall_time":
                 continue
             va, vb = ra[c], rb[c]
             if isinstance(va, float) and math.isnan(va):
@@ -129,7 +129,7 @@ def test_failed_run_is_a_row_and_the_sweep_resumes(tmp_path, fmu_dir, one_worker
     assert math.isnan(bad["mean_crank_speed"])
     assert all(math.isfinite(r["mean_crank_speed"]) for r in (table.rows[0], table.rows[2]))
     header, rows = read_table(out / "sweep.csv")
-    assert header[:2] == ["run", "press.l"] and header[-3:] == ["status", "reason", "wall_seconds"]
+    assert header[:2] == ["run", "press.l"] and header[-3:] == ["status", "reason", "wall_time"]
     assert [r["status"] for r in rows] == status
     again = sweep(ROOT / "scenarios/servo_press.toml", ["press.l=0.25,0.04,0.3"], out, **kw)
     assert again.executed == 0
@@ -294,7 +294,7 @@ def test_hybrid_scene_reports_its_event_figures(tmp_path, hybrid_fmus, one_worke
 
 
 def test_flywheel_report_marks_eq_28(tmp_path, servo_scene):
-    """`crankfmu analyze flywheel`: eq. (28) from press_analysis, 0.1409 kg m^2 on the motor
+    """`crankfmu analyze flywheel`: eq. (28) from press_analysis, 0.1409 kg.m2 on the motor
     shaft (docs/stephenson_press_analysis.md section 8); delta_1 falls with J_f and
     sqrt(26) is lowest at J_Mx."""
     from crankfmu.studies.flywheel import analytic, report
@@ -305,11 +305,12 @@ def test_flywheel_report_marks_eq_28(tmp_path, servo_scene):
     assert a["delta_1"][0] > a["delta_1"][1] > a["delta_1"][2]
     assert a["ratio_26"][1] < min(a["ratio_26"][0], a["ratio_26"][2])
     csv = tmp_path / "sweep.csv"
-    csv.write_text("run,motor.J_flywheel,delta,status,reason,wall_seconds\n"
+    csv.write_text("run,motor.J_flywheel,delta,status,reason,wall_time\n"
                    "0,0.0,0.1007,completed,,1.0\n1,0.2,0.03,completed,,1.0\n"
                    "2,0.1,nan,failed,x,1.0\n")
     text, written = report(csv, servo_scene, tmp_path, plot=True)
-    assert "J_Mx = 14.09 kg m^2 at the crank = 0.1409 kg m^2" in text
+    # units as the FMUs spell them (before: "kg m^2")
+    assert "J_Mx = 14.09 kg.m2 at the crank = 0.1409 kg.m2" in text and "m^2" not in text
     assert written == [tmp_path / "flywheel.csv", tmp_path / "flywheel.png"]
     assert (tmp_path / "flywheel.png").stat().st_size > 10_000
 
@@ -376,7 +377,7 @@ def test_dask_cluster_equals_serial(tmp_path, rotor_fmu_dir, serial_table, clust
     assert all(r["status"] == "completed" for r in serial_table.rows)
     assert len(serial_table.rows) == 12
     table = sweep(spinner(tmp_path), VARY, tmp_path / "out", client=cluster,
-                  fmu_dir=rotor_fmu_dir, progress=False)
+                  fmu_dir=rotor_fmu_dir, progress=False, plot=True)
     same_table(serial_table, table)
     assert (tmp_path / "out" / "sweep.png").is_file()
 
@@ -413,7 +414,7 @@ def test_accuracy_and_compare_on_a_dask_cluster_equal_serial(fmu_dir, tmp_path, 
             (ob.setting, ob.status, ob.error, ob.do_steps)
         name = f"runs/{oa.setting.label}.csv"
         assert (tmp_path / "serial" / name).read_bytes() == (tmp_path / "dask" / name).read_bytes()
-    assert serial_cmp["text"] == dask_cmp["text"]
+    assert serial_cmp.text == dask_cmp.text
     assert (tmp_path / "cmp_serial" / "compare.csv").read_bytes() == \
         (tmp_path / "cmp_dask" / "compare.csv").read_bytes()
 
@@ -440,7 +441,7 @@ def test_cli_on_a_scheduler_address(tmp_path, rotor_fmu_dir, cluster, one_worker
     out = tmp_path / "cli"
     assert main(["sweep", str(scene), "--vary", "r.J=0.3,0.6", "--vary", "r.d=0.2:1.0:2",
                  "--out", str(out), "--scheduler", cluster.scheduler.address,
-                 "--fmus", str(rotor_fmu_dir), "--no-progress"]) == 0
+                 "--fmus", str(rotor_fmu_dir), "--no-progress", "--plot"]) == 0
     assert "4 runs (4 executed now, 0 kept" in capsys.readouterr().out
     serial = sweep(scene, ["r.J=0.3,0.6", "r.d=0.2:1.0:2"], tmp_path / "serial",
                    executor=one_worker, fmu_dir=rotor_fmu_dir, progress=False, plot=False)

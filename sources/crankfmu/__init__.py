@@ -1,20 +1,16 @@
-"""crankfmu: FMI 2.0 co-simulation components for crank-driven forming machines.
+"""crankfmu: FMI 2.0 and 3.0 components for crank-driven forming machines, and a runner.
 
 The Python API (crankfmu/api.py; imported on first use, so `import crankfmu` stays cheap):
-simulate, reference, accuracy, compare, sweep, load_scene and Result."""
-import sys as _sys
-import types as _types
-
+simulate, reference, accuracy, compare, sweep, load_scene and Result. No subpackage shares a
+name with a function here (the monolithic reference's code is crankfmu.monolithic), so importing
+any part of crankfmu leaves these functions in place."""
 from .version import __version__  # noqa: F401
 
 __all__ = ["Result", "accuracy", "compare", "load_scene", "reference", "simulate", "sweep"]
-# Functions named like a subpackage or module of crankfmu (crankfmu/reference/, studies/accuracy/,
-# compare.py): importing that submodule must not replace the function on the package
-_SHADOWED = ("reference",)  # the function crankfmu.reference over the subpackage
 
 
 def sweep(scene, vary, out=None, **options):
-    """Parameter sweep of a scene; returns the table (crankfmu.api.sweep: `vary` one
+    """Parameter sweep of a scene: a SweepTable (crankfmu.api.sweep: `vary` one
     "COMP.PARAM=..." string or a list of them; without `out` the sweep runs in a temporary
     folder that is removed, and the table's paths are None)."""
     from .api import sweep as _sweep
@@ -29,15 +25,15 @@ def reference(scene, **options):
 
 
 def accuracy(scene, **options):
-    """Error against the reference and wall time per master setting (crankfmu.api.accuracy:
-    out, stop_time, parameters, inputs and AccuracyOptions' fields)."""
+    """Error against the reference and wall time per master setting: an AccuracyResult
+    (crankfmu.api.accuracy: out, stop_time, parameters, inputs and AccuracyOptions' fields)."""
     from .api import accuracy as _accuracy
     return _accuracy(scene, **options)
 
 
 def compare(scene_a, scene_b, **options):
-    """Run two scenes and compare them (crankfmu.api.compare: stop_time, out, fmu_dir, jobs,
-    scheduler, progress)."""
+    """Run two scenes and compare them: a CompareResult (crankfmu.api.compare: stop_time, out,
+    fmu_dir, jobs, scheduler, progress, plot)."""
     from .api import compare as _compare
     return _compare(scene_a, scene_b, **options)
 
@@ -51,13 +47,3 @@ def __getattr__(name):
 
 def __dir__():
     return sorted(set(globals()) | set(__all__))
-
-
-class _Package(_types.ModuleType):
-    def __setattr__(self, name, value):
-        if name in _SHADOWED and isinstance(value, _types.ModuleType):
-            return  # the submodule stays reachable: sys.modules, `from crankfmu.x import y`
-        super().__setattr__(name, value)
-
-
-_sys.modules[__name__].__class__ = _Package

@@ -18,6 +18,15 @@ unconnected input; "master.step" and the other [master] keys go in `parameters` 
 --set). An argument of the wrong type raises crankfmu.errors.OptionError naming it and what it
 takes. A run whose own figures say it is not to be trusted has `Result.status` "unreliable"
 (crankfmu.cosim.trust) and warns (UnreliableResultWarning) with the cause and the remedy.
+
+Each function returns an object with its values, their units and `to_pandas()`: simulate and
+reference a Result, sweep a SweepTable, accuracy an AccuracyResult, compare a CompareResult.
+
+`jobs` means what the command line's --jobs N means (docs/cli.md): 1 (the default) runs
+everything in the calling process, so a plain script needs no `if __name__ == "__main__":`;
+N > 1 starts worker processes, which import the calling script again: a script must then make
+its calls under `if __name__ == "__main__":` (without one, crankfmu raises
+crankfmu.cosim.companions.WorkerStartError saying so); 0 is one per core.
 """
 from __future__ import annotations
 
@@ -79,16 +88,21 @@ class Result:
         """A matplotlib Figure: one panel per recorded variable (or `variables`), each axis
         with its unit, a turning crank angle modulo 2 pi. `steady=True`: the periodic steady
         state instead, crank speed and drive torque over the last `cycles` revolutions (needs
-        the scene's [analysis] roles recorded), with `reference` (crankfmu.reference's Result)
-        drawn over it. Not registered with pyplot, so the backend stays as it is; in Jupyter
-        the returned Figure shows inline."""
-        from .cosim.results import figure, steady_figure
+        the scene's [analysis] roles recorded, and a run that turns the crank at least once
+        after [analysis].from_time: ValueError saying why otherwise), with `reference`
+        (crankfmu.reference's Result) drawn over it. Not registered with pyplot, so the backend
+        stays as it is; in Jupyter the returned Figure shows inline."""
+        from .cosim.results import figure, no_steady_state, steady_figure
         if steady:
             if not self.analysis or not all(self.analysis.get(r) in self.names for r in
                                             ("crank_angle", "crank_speed", "drive_torque")):
                 raise ValueError("plot(steady=True) needs the scene's [analysis] crank_angle, "
                                  "crank_speed and drive_torque among the recorded variables")
             rows = self.values.view(np.float64).reshape(len(self.values), -1)
+            why = no_steady_state(self.names, rows, self.analysis)
+            if why is not None:
+                raise ValueError(f"plot(steady=True): no steady state to show: {why}; plot() "
+                                 "draws the recorded variables over time")
             ref = None
             if reference is not None:
                 ref = (reference.names,
@@ -101,14 +115,8 @@ class Result:
 
     def to_pandas(self):
         """A pandas DataFrame indexed by time (needs pandas); units in `df.attrs["units"]`."""
-        try:
-            import pandas as pd
-        except ImportError:
-            raise ImportError("Result.to_pandas needs pandas: pip install pandas") from None
-        df = pd.DataFrame({n: self.values[n] for n in self.names},
-                          index=pd.Index(self.values["time"], name="time"))
-        df.attrs["units"] = dict(self.units)
-        return df
+        from .studies.table import data_frame
+        return data_frame(self.values.tolist(), ["time", *self.names], self.units, index="time")
 
 
 def _result(recorder, metadata: dict, files: dict, title: str, statistics=None,
@@ -124,7 +132,7 @@ def _result(recorder, metadata: dict, files: dict, title: str, statistics=None,
 
 
 def load_scene(scene):
-    """A scene file (.toml or .ssp) loaded and checked (crankfmu.system.load_scene)."""
+    """A scene file (.toml or .ssp) loaded and checked (crankfmu.system.load.load_scene)."""
     from .system.load import load_scene as _load
     return _load(_path(scene, "scene", "a path to a scene file (.toml or .ssp)", required=True))
 
@@ -171,9 +179,12 @@ def _mapping(value, name: str, example: str):
 
 
 def _jobs(value, name: str = "jobs") -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise OptionError(f"{name}: a whole number of processes >= 1, got {_show(value)}")
-    return value
+    """`jobs` checked: a whole number >= 0 (0: one per core), as processes to use."""
+    from .cosim.companions import processes
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise OptionError(f"{name}: a whole number of processes >= 0 (1: this process; "
+                          f"0: one per core), got {_show(value)}")
+    return processes(value)
 
 
 def prepare(scene, *, stop_time=None, step=None, algorithm=None, parameters=None, inputs=None,
@@ -204,7 +215,8 @@ def simulate(scene, *, stop_time=None, step=None, algorithm=None, parameters=Non
     master, extrapolation and step are chosen from the estimate (crankfmu.cosim.target);
     raises crankfmu.cosim.target.TargetNotMet saying why when no setting meets it. `jobs=2`:
     the companion runs execute in a worker process beside the run (crankfmu.cosim.companions;
-    a spawned interpreter, so a script that calls this needs `if __name__ == "__main__":`).
+    a spawned interpreter, so a script that calls this needs `if __name__ == "__main__":`,
+    the module's docstring).
     A run marked unreliable (Result.status) warns with UnreliableResultWarning."""
     from .cosim.results import check_run_set
     from .cosim.runner import RunOptions, run_scene
@@ -262,7 +274,7 @@ def reference(scene, *, stop_time=None, parameters=None, inputs=None, rtol=None,
     the run's grid. `out`: the output folder (<scene name>_reference.csv and its sidecar);
     nothing is written without it."""
     from .cosim.results import check_run_set
-    from .reference import DEFAULT_RTOL, solve_reference, write_reference
+    from .monolithic import DEFAULT_RTOL, solve_reference, write_reference
     scene = prepare(scene, stop_time=stop_time, parameters=parameters, inputs=inputs)
     folder = _path(out, "out", "the output folder")
     csv = check_run_set(folder / f"{scene.name}_reference.csv", "out") if folder else None
@@ -279,13 +291,16 @@ def reference(scene, *, stop_time=None, parameters=None, inputs=None, rtol=None,
 
 def accuracy(scene, *, out=None, stop_time=None, parameters=None, inputs=None, **options):
     """Error against the monolithic reference and wall time per master setting
-    (crankfmu.studies.accuracy.run_accuracy; `options` are AccuracyOptions' fields: algorithms,
-    extrapolations, steps, tolerances, fmu_tolerances, metric, variables, cycles, target,
-    reference_rtol, reference_csv (a reference from elsewhere, in the CSV layout of a run),
-    report (report(outcome, kept) as each run finishes), resume, fmu_dir, progress, jobs,
-    scheduler, executor). `out`: the folder to write
-    (accuracy.csv, work_precision.png, the runs); without it they go to a temporary folder
-    that is removed, and the result's paths are None."""
+    (crankfmu.studies.accuracy.run_accuracy): an AccuracyResult (its outcomes, the observed
+    orders, `to_pandas()` with the columns' units). `options` are AccuracyOptions' fields:
+    algorithms, extrapolations, steps, tolerances, fmu_tolerances, metric, variables, cycles,
+    meet (an error to meet: the result's cheapest and fewest_steps), plot, reference_rtol,
+    reference_csv (a reference from elsewhere, in the CSV layout of a run), report
+    (report(outcome, kept) as each run finishes), resume, fmu_dir, progress, jobs (1, the
+    default: in this process; more: worker processes, the module's docstring), scheduler,
+    executor. `out`: the folder to write (accuracy.csv, accuracy.json, the runs, with `plot`
+    the figures); without it they go to a temporary folder that is removed, and the result's
+    paths are None."""
     import dataclasses
 
     from .studies.accuracy import AccuracyOptions, run_accuracy
@@ -297,22 +312,27 @@ def accuracy(scene, *, out=None, stop_time=None, parameters=None, inputs=None, *
     scene = prepare(scene, stop_time=stop_time, parameters=parameters, inputs=inputs)
     options.setdefault("progress", False)
     options["fmu_dir"] = _path(options.get("fmu_dir"), "fmu_dir", "the folder of built FMUs")
+    if "jobs" in options:
+        options["jobs"] = _jobs(options["jobs"])
     folder = _path(out, "out", "the output folder")
     if folder is not None:
         return run_accuracy(scene, AccuracyOptions(out_dir=folder, out_option="out", **options))
     with tempfile.TemporaryDirectory(prefix="crankfmu-accuracy-") as tmp:
         result = run_accuracy(scene, AccuracyOptions(out_dir=Path(tmp), out_option="out",
                                                      **options))
-    result.reference_csv = result.csv = result.png = None
+    result.reference_csv = result.csv = result.sidecar = None
+    result.figures = []
     return result
 
 
 def compare(scene_a, scene_b, *, stop_time=None, out=None, fmu_dir=None, jobs=1,
-            scheduler=None, progress=False) -> dict:
+            scheduler=None, progress=False, plot=False):
     """Run two scenes (e.g. a component swap) and compare cycle time, speeds, delta, peak
-    torques and energy per stroke (crankfmu.studies.compare). Returns a dict: "rows" (metric, unit, A,
-    B, B - A, relative), "text" (the table), "a" and "b" (the role series); with `out`, the
-    folder written (compare.csv, compare.png, both runs' CSVs) and "csv", "png" in it."""
+    torques and energy per stroke (crankfmu.studies.compare): a CompareResult (`table`: rows
+    (metric, unit, A, B, B - A, relative), `text`: the table as printed, `a` and `b`: the role
+    series, `to_pandas()`); with `out`, the folder written (compare.csv, both runs' CSVs, with
+    `plot` compare.png) and `csv`, `png` in it. `jobs`: 1 runs both here, one after the other;
+    2 side by side in worker processes (the module's docstring)."""
     import contextlib
 
     from .studies.compare import compare_scenes
@@ -328,19 +348,23 @@ def compare(scene_a, scene_b, *, stop_time=None, out=None, fmu_dir=None, jobs=1,
     with contextlib.nullcontext() if serial else make_executor(jobs, scheduler) as executor:
         if folder is not None:
             return compare_scenes(scenes[0], scenes[1], folder, options, executor, "out",
-                                  "stop_time")
+                                  "stop_time", plot)
         with tempfile.TemporaryDirectory(prefix="crankfmu-compare-") as tmp:
             result = compare_scenes(scenes[0], scenes[1], Path(tmp), options, executor, "out",
-                                    "stop_time")
-    result["csv"] = result["png"] = None
+                                    "stop_time", plot)
+    result.csv = result.png = None
     return result
 
 
 def sweep(scene, vary, out=None, **options):
-    """Parameter sweep of a scene; returns the table (crankfmu.studies.sweep.sweep). `vary`:
-    one "COMP.PARAM=V1,V2,..." or "COMP.PARAM=START:STOP:N" string, or a list of them (or of
-    crankfmu.studies.sweep.Vary). `out`: the output folder; without it the sweep runs in a
-    temporary folder that is removed (the table's paths are None)."""
+    """Parameter sweep of a scene: a SweepTable (one row per run, the units of its columns,
+    `to_pandas()`; crankfmu.studies.sweep.sweep, whose keyword arguments `options` are: jobs
+    (1, the default: in this process; more: worker processes, the module's docstring),
+    scheduler, stop_time, from_time, samples, seed, overrides, fmu_dir, progress, plot).
+    `vary`: one "COMP.PARAM=V1,V2,..." or "COMP.PARAM=START:STOP:N" string, or a list of them
+    (or of crankfmu.studies.sweep.Vary). `out`: the output folder (sweep.csv, sweep.json, with
+    `plot` sweep.png); without it the sweep runs in a temporary folder that is removed (the
+    table's paths are None)."""
     from .studies.sweep import Vary, sweep as _sweep
     scene = _scene(scene)
     vary = [vary] if isinstance(vary, (str, Vary)) else vary
@@ -348,10 +372,12 @@ def sweep(scene, vary, out=None, **options):
         raise OptionError(f"vary: a \"COMP.PARAM=V1,V2,...\" string or a list of them, got "
                           f"{_show(vary)}")
     options["fmu_dir"] = _path(options.get("fmu_dir"), "fmu_dir", "the folder of built FMUs")
+    if "jobs" in options:
+        options["jobs"] = _jobs(options["jobs"])
     folder = _path(out, "out", "the output folder")
     if folder is not None:
         return _sweep(scene, vary, folder, names=API_NAMES, **options)
     with tempfile.TemporaryDirectory(prefix="crankfmu-sweep-") as tmp:
         table = _sweep(scene, vary, Path(tmp), names=API_NAMES, **options)
-    table.csv = table.png = None
+    table.csv = table.png = table.sidecar = None
     return table

@@ -38,3 +38,11 @@ class SceneError(CrankfmuError, ValueError):
 
 class OptionError(CrankfmuError, ValueError):
     """A command-line option, an API argument or a master option outside what it allows."""
+
+
+def warning_text(message, category) -> str:
+    """A Python warning as crankfmu shows it (after "warning: "), on one line and without the
+    file and source line it came from: `<Category>: <message>`, the message alone for a
+    UserWarning."""
+    kind = "" if category is UserWarning else f"{category.__name__}: "
+    return kind + " ".join(str(message).split())

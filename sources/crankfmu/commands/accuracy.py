@@ -1,16 +1,22 @@
 """`crankfmu accuracy SCENE.toml`: what accuracy costs in wall time, per master setting.
 
-Sweeps algorithm x extrapolation x communication step (x FMU tolerance), compares every run with
-the monolithic reference (solved once, cached in --out DIR), and prints a table, the observed
-convergence orders and the cheapest setting meeting --target; writes accuracy.csv and
-work_precision.png into --out DIR. Each run is printed as it finishes (under a progress bar
-over the runs) and kept in --out DIR/runs, so a sweep started again resumes where it stopped
-(--fresh runs everything again). --reference FILE.csv takes the reference from elsewhere.
+Sweeps algorithm x coupling (extrapolation, or a Taylor coupling's order where the FMUs offer
+output derivatives) x communication step (x FMU tolerance), compares every run with the
+monolithic reference (solved once, cached in --out DIR), and prints a table (once, when the
+runs and their error estimates are done; a progress bar over the runs on stderr until then; a
+Python warning of a run as one line there), the observed convergence orders and, with
+--meet TOL, the cheapest setting whose error is at most TOL; writes accuracy.csv with its
+sidecar accuracy.json (the units of its columns) into --out DIR, and with --plot
+work_precision.png and estimate_vs_error.png. Each run is kept in --out DIR/runs, so a sweep
+started again resumes where it stopped (--fresh runs everything again). --reference FILE.csv
+takes the reference from elsewhere.
 """
 from __future__ import annotations
 
-import sys
 from pathlib import Path
+
+from .options import (add_fmu_option, add_jobs_option, add_output_options, add_scene_options,
+                      load_with_options)
 
 
 def _floats(text: str) -> list[float]:
@@ -26,28 +32,41 @@ def _names(text: str) -> list[str]:
 
 
 def register(sub) -> None:
-    from ..studies.accuracy import DEFAULT_STEP_FACTORS, DEFAULT_TARGET, DEFAULT_TOLERANCES, METRICS
-    from ..cli import add_fmu_option, add_output_options, add_scene_options
+    from ..studies.accuracy import (DEFAULT_STEP_FACTORS, DEFAULT_TAYLORS, DEFAULT_TOLERANCES,
+                                    METRICS)
 
     p = sub.add_parser("accuracy", help="error vs wall time of master settings against the "
                                         "monolithic reference (work-precision)")
     add_scene_options(p)
     add_fmu_option(p)
     add_output_options(p, "output folder (default results/<scene name>_accuracy): "
-                          "accuracy.csv, work_precision.png, reference.csv (cache), runs/")
-    p.add_argument("--algorithms", type=_names,
-                   help="comma list (default: every available master)")
-    p.add_argument("--extrapolations", type=_ints, help="comma list of 0, 1, 2 (default all)")
-    p.add_argument("--steps", type=_floats,
+                          "accuracy.csv and accuracy.json (its columns' units), reference.csv "
+                          "(cache), runs/, and with --plot the figures",
+                       "also draw work_precision.png (error against wall time and doStep "
+                       "calls) and estimate_vs_error.png")
+    p.add_argument("--algorithms", type=_names, metavar="NAMES",
+                   help="masters, a comma list (default: every available master)")
+    p.add_argument("--extrapolations", type=_ints, metavar="ORDERS",
+                   help="comma list of 0, 1, 2 (default all)")
+    p.add_argument("--taylors", type=_ints, metavar="ORDERS",
+                   help="Taylor coupling orders ([master].taylor) for the masters that take it, "
+                        "comma list of 1 .. 4, 0 for none (default without --algorithms: "
+                        + ",".join(map(str, DEFAULT_TAYLORS)) + " where every FMU with "
+                        "connected outputs offers their derivatives; else none)")
+    p.add_argument("--steps", type=_floats, metavar="S,...",
                    help="communication steps [s], comma list (default: the scene's step x "
                         + ", ".join(f"{f:g}" for f in DEFAULT_STEP_FACTORS) + ")")
-    p.add_argument("--tolerances", type=_floats,
-                   help="tolerances of a variable-step master, swept instead of the step "
+    p.add_argument("--tolerances", type=_floats, metavar="TOL,...",
+                   help="tolerances [1] of a variable-step master, swept instead of the step "
                         f"(default {','.join(f'{t:g}' for t in DEFAULT_TOLERANCES)})")
-    p.add_argument("--fmu-tolerances", type=_floats,
-                   help="FMU internal tolerances to sweep (default: the scene's fmu_tolerance)")
-    p.add_argument("--target", type=float, default=DEFAULT_TARGET,
-                   help=f"accuracy to meet, in the metric's units (default {DEFAULT_TARGET:g})")
+    p.add_argument("--fmu-tolerances", type=_floats, metavar="TOL,...",
+                   help="FMU internal tolerances [1] to sweep (default: the scene's "
+                        "fmu_tolerance)")
+    p.add_argument("--meet", type=float, metavar="TOL",
+                   help="an error [1] (the metric's, relative) to meet: print the cheapest "
+                        "setting in wall time and the one with the fewest doStep calls whose "
+                        "error is at most TOL, and draw it in work_precision.png (default: "
+                        "none)")
     p.add_argument("--metric", choices=METRICS,
                    help="default: the scene's [analysis].metric, else events if the scene has "
                         "[analysis].events, else max. max: max over time of "
@@ -62,37 +81,38 @@ def register(sub) -> None:
     p.add_argument("--fresh", action="store_true",
                    help="run every setting again (default: keep the finished runs found in "
                         "--out DIR/runs from an earlier, interrupted sweep)")
-    p.add_argument("--variables", type=_names,
-                   help="recorded variables of the metric (default: the *.w_crank ones, else all)")
-    p.add_argument("--cycles", type=int, default=1, help="revolutions of metric steady")
-    p.add_argument("--rtol", type=float, default=1e-10, help="reference solver tolerance")
+    p.add_argument("--variables", type=_names, metavar="NAMES",
+                   help="recorded variables of the metric, a comma list (default: the "
+                        "*.w_crank ones, else all)")
+    p.add_argument("--cycles", type=int, default=1, metavar="N",
+                   help="revolutions of metric steady (default 1)")
+    p.add_argument("--rtol", type=float, default=1e-10, metavar="TOL",
+                   help="relative tolerance [1] of the reference's solver (default 1e-10)")
     p.add_argument("--no-estimate", action="store_true",
                    help="no estimated_error column (its companion runs at 8 and 16 x the "
                         "scene's step and a tenth of the adaptive tolerances are not run)")
-    p.add_argument("--floor-factor", type=float, default=10.0,
-                   help="orders use errors above this x the FMU tolerance (default 10)")
-    from .sweep import add_executor_options
-    add_executor_options(p, "runs (wall times are measured per run: parallel runs share the "
-                            "machine)")
+    p.add_argument("--floor-factor", type=float, default=10.0, metavar="X",
+                   help="orders use errors above X times the FMU tolerance [1] (default 10)")
+    add_jobs_option(p, "the runs (wall times are measured per run: parallel runs share the "
+                       "machine)")
     p.set_defaults(func=run_accuracy_command)
 
 
 def run_accuracy_command(args) -> int:
     from ..studies.accuracy import AccuracyOptions, format_orders, format_table, run_accuracy
-    from ..cli import load_with_options
 
     scene = load_with_options(args)
     options = AccuracyOptions(
         out_dir=args.out or Path("results") / f"{scene.name}_accuracy",
         algorithms=args.algorithms,
         extrapolations=args.extrapolations or [0, 1, 2],
+        taylors=None if args.taylors is None else [q for q in args.taylors if q],
         steps=args.steps,
         fmu_tolerances=args.fmu_tolerances, metric=args.metric, variables=args.variables,
-        cycles=args.cycles, target=args.target, reference_rtol=args.rtol,
+        cycles=args.cycles, meet=args.meet, reference_rtol=args.rtol, plot=args.plot,
         floor_factor=args.floor_factor, fmu_dir=args.fmus,
         progress=False if args.no_progress else None, jobs=args.jobs, scheduler=args.scheduler,
-        reference_csv=args.reference, resume=not args.fresh, report=_printer(),
-        estimate=not args.no_estimate)
+        reference_csv=args.reference, resume=not args.fresh, estimate=not args.no_estimate)
     if args.tolerances:
         options.tolerances = args.tolerances
     _check_options(options)
@@ -105,12 +125,12 @@ def run_accuracy_command(args) -> int:
     if events:
         print(events)
     print(format_orders(result.orders))
-    _print_choice("cheapest in wall time", result.cheapest, args.target)
-    _print_choice("fewest doStep calls", result.fewest_steps, args.target)
+    if args.meet is not None:
+        _print_choice("cheapest in wall time", result.cheapest, args.meet)
+        _print_choice("fewest doStep calls", result.fewest_steps, args.meet)
     if options.estimate:
         _print_estimates(result.outcomes)
-    print(f"wrote {result.csv}, {result.png}" + (
-        f", {result.csv.with_name('estimate_vs_error.png')}" if options.estimate else ""))
+    print("wrote " + ", ".join(str(p) for p in [result.csv, result.sidecar, *result.figures]))
     return 0
 
 
@@ -118,27 +138,12 @@ def _print_estimates(outcomes) -> None:
     from ..studies.accuracy.estimates import estimate_ratio
     ratios = [r for r in (estimate_ratio(o) for o in outcomes) if r == r]
     inside = sum(1 for r in ratios if 1 / 3 <= r <= 3)
-    from ..studies.accuracy.sweep import is_monolithic
-    completed = sum(1 for o in outcomes if o.ok and not is_monolithic(o.setting.algorithm))
+    from ..masters import traits
+    completed = sum(1 for o in outcomes if o.ok and not traits(o.setting.algorithm).monolithic)
     print(f"error estimate (Richardson, companion runs): within a factor 3 of the true error in "
           f"{inside} of {completed} completed runs" + (
               f" (estimate / error from {min(ratios):.2g} to {max(ratios):.2g})" if ratios
               else ""))
-
-
-def _printer():
-    """report(outcome, kept): one table row per run as it finishes, above the progress bar."""
-    from ..studies.accuracy.report import TABLE_HEAD, format_outcome
-    printed = []
-
-    def report(outcome, kept: bool) -> None:
-        from tqdm import tqdm
-        if not printed:
-            tqdm.write(TABLE_HEAD)
-            printed.append(True)
-        tqdm.write(format_outcome(outcome) + ("  (kept from an earlier sweep)" if kept else ""))
-        sys.stdout.flush()
-    return report
 
 
 def _check_options(o) -> None:
@@ -152,8 +157,11 @@ def _check_options(o) -> None:
                           f"{', '.join(MASTERS)}")
     if any(x not in (0, 1, 2) for x in o.extrapolations):
         raise OptionError(f"--extrapolations: {o.extrapolations}: each must be 0, 1 or 2")
+    if any(q not in (1, 2, 3, 4) for q in o.taylors or []):
+        raise OptionError(f"--taylors: {o.taylors}: each must be 0 (none), 1, 2, 3 or 4")
     for name, values in (("--steps", o.steps), ("--tolerances", o.tolerances),
-                         ("--fmu-tolerances", o.fmu_tolerances), ("--target", [o.target]),
+                         ("--fmu-tolerances", o.fmu_tolerances),
+                         ("--meet", [o.meet] if o.meet is not None else []),
                          ("--rtol", [o.reference_rtol])):
         if any(not v > 0 for v in values or []):
             raise OptionError(f"{name}: every value must be > 0, got {values}")
@@ -161,12 +169,13 @@ def _check_options(o) -> None:
         raise OptionError(f"--cycles must be >= 1, got {o.cycles}")
 
 
-def _print_choice(what: str, o, target: float) -> None:
+def _print_choice(what: str, o, meet: float) -> None:
     if o is None:
-        print(f"{what} meeting --target {target:g}: none of the runs")
+        print(f"{what} meeting --meet {meet:g}: none of the runs")
         return
     s = o.setting
-    print(f"{what} meeting --target {target:g}: --algorithm {s.algorithm} --extrapolation "
-          f"{s.extrapolation} --step {s.step:g} --fmu-tolerance {s.fmu_tolerance:g}"
+    coupling = f"--taylor {s.taylor}" if s.taylor else f"--extrapolation {s.extrapolation}"
+    print(f"{what} meeting --meet {meet:g}: --algorithm {s.algorithm} {coupling} "
+          f"--step {s.step:g} --fmu-tolerance {s.fmu_tolerance:g}"
           + (f" --tolerance {s.tolerance:g}" if o.knob == "tolerance" else "")
           + f" (error {o.error:.2e}, {o.wall_seconds:.2f} s, {o.do_steps} doStep calls)")

@@ -59,10 +59,11 @@ def register(sub) -> None:
         impact.add_argument(f"--{dest.replace('_', '-')}", dest=dest, type=float,
                             help=f"{name} [{unit}] (default: MO-100)")
     impact.add_argument("--k-n", type=float, nargs="+", default=[40e6, 80e6, 160e6],
-                        help="bearing constants k_n [N(2/3)/m] (table and Figs. 2-3)")
+                        help="bearing constants k_n [N(2/3)/m] (table and Figs. 2-3; default "
+                             "40e6 80e6 160e6)")
     impact.add_argument("--s-factor", type=float, nargs="+", default=[1.1, 0.9],
                         help="strike distance S as a multiple of the centre of percussion "
-                             "J/(m r) [1]")
+                             "J/(m r) [1] (default 1.1 0.9)")
     impact.add_argument("--hertz-peak", action="store_true",
                         help="also iterate the support stiffness c0 = k_n Tm^(1/3) on the peak "
                              "of the Hertz-contact impact (the model stepped) and compare")
@@ -99,7 +100,8 @@ def register(sub) -> None:
                                             "hammer_bearings.toml)")
     hammer.add_argument("csv", type=Path, nargs="+", help="result CSV(s) of a hammer scene")
     hammer.add_argument("--component", default="hammer",
-                        help="the CrankRockerHammer component (a name)")
+                        help="the CrankRockerHammer component's name in the runs (default "
+                             "hammer)")
     _outputs(hammer, "hammer", "hammer.png (motor torque, crank speed, P and T peaks)")
     hammer.set_defaults(func=run_hammer)
 

@@ -1,9 +1,11 @@
-"""`crankfmu compare A.toml B.toml [--out DIR]`: run two scenes (a component swap) and report the
-differences that matter (sources/crankfmu/studies/compare.py): table printed and in DIR/compare.csv,
-overlay plot DIR/compare.png, both runs' CSVs in DIR."""
+"""`crankfmu compare A.toml B.toml [--out DIR] [--plot]`: run two scenes (a component swap) and
+report the differences that matter (crankfmu/studies/compare.py): the table printed and in
+DIR/compare.csv (a unit column), both runs' CSVs in DIR, with --plot the overlay DIR/compare.png."""
 from __future__ import annotations
 
 from pathlib import Path
+
+from .options import add_fmu_option, add_jobs_option, add_output_options
 
 
 def register(sub) -> None:
@@ -11,13 +13,13 @@ def register(sub) -> None:
                                        "cycle time, speeds, delta, peak torques, energy per stroke")
     p.add_argument("scene_a", type=Path, help="scene A (.toml; needs an [analysis] table)")
     p.add_argument("scene_b", type=Path, help="scene B (.toml; e.g. one with a [swap] table)")
-    p.add_argument("--stop-time", type=float, help="end of both runs [s]")
-    from ..cli import add_fmu_option, add_output_options
+    p.add_argument("--stop-time", type=float, metavar="S",
+                   help="end of both runs [s] (default: each scene's [scene].stop_time)")
     add_fmu_option(p)
-    add_output_options(p, "output folder: compare.csv, compare.png and both runs' CSVs and "
-                          "sidecars (default results/<A name>_vs_<B name>)")
-    from .sweep import add_executor_options
-    add_executor_options(p, "two runs")
+    add_output_options(p, "output folder (default results/<A name>_vs_<B name>): compare.csv, "
+                          "both runs' CSVs and sidecars, with --plot compare.png",
+                       "also draw compare.png: crank speed and torques of both runs over time")
+    add_jobs_option(p, "the two runs")
     p.set_defaults(func=run_compare)
 
 
@@ -41,7 +43,8 @@ def run_compare(args) -> int:
     out = check_compare_outputs(scenes[0], scenes[1], args.out or Path("results") /
                                 f"{scenes[0].name}_vs_{scenes[1].name}")  # before any run
     with make_executor(args.jobs, args.scheduler) as executor:
-        result = compare_scenes(scenes[0], scenes[1], out, options, executor)
-    print(result["text"])
-    print(f"wrote {result['csv']}, {result['png']} and the runs' CSVs in {out}")
+        result = compare_scenes(scenes[0], scenes[1], out, options, executor, plot=args.plot)
+    print(result.text)
+    print(f"wrote {result.csv}" + (f", {result.png}" if result.png else "")
+          + f" and the runs' CSVs in {out}")
     return 0

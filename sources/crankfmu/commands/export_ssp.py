@@ -4,6 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .options import (add_fmu_option, add_master_options, add_output_options, add_scene_options,
+                      load_with_options)
+
 
 def register(sub) -> None:
     p = sub.add_parser("export-ssp", help="write a scene as an SSP archive (.ssp) with its FMUs",
@@ -11,7 +14,6 @@ def register(sub) -> None:
                                    "connections, parameter values, default experiment) and the "
                                    "FMUs into a .ssp that fmpy, libcosim and ecos load and "
                                    "`crankfmu run` runs back. See docs/ssp.md.")
-    from ..cli import add_fmu_option, add_master_options, add_output_options, add_scene_options
     add_scene_options(p)
     add_master_options(p)
     add_fmu_option(p)
@@ -20,7 +22,6 @@ def register(sub) -> None:
 
 
 def run_export(args) -> int:
-    from ..cli import load_with_options
     from ..outputs import check_files
     from ..system.wiring import default_fmu_dir
     from ..system.ssp_export import describe_fmus, export_ssp, lossy_parts

@@ -4,21 +4,22 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .options import add_output_options, add_scene_options, add_step_option, load_with_options
+
 
 def register(sub) -> None:
-    from ..cli import add_output_options, add_scene_options, add_step_option
-    from ..reference import DEFAULT_RTOL
+    from ..monolithic import DEFAULT_RTOL
 
     p = sub.add_parser("reference", help="monolithic reference of a scene (one ODE, scipy)")
     add_scene_options(p)
-    add_step_option(p, "record grid: the run's communication step [s] ([master].step), so "
-                       "reference and run CSVs line up row by row")
+    add_step_option(p, "record grid: the run's communication step [s] (default: the scene's "
+                       "[master].step), so reference and run CSVs line up row by row")
     add_output_options(p, "output folder (default results/): <scene name>_reference.csv, its "
                           "JSON sidecar <scene name>_reference.json and with --plot "
                           "<scene name>_reference.png",
                        "also write a PNG of the recorded variables")
-    p.add_argument("--rtol", type=float, default=DEFAULT_RTOL,
-                   help=f"relative tolerance of the solver (default {DEFAULT_RTOL:g}; absolute "
+    p.add_argument("--rtol", type=float, default=DEFAULT_RTOL, metavar="TOL",
+                   help=f"relative tolerance [1] of the solver (default {DEFAULT_RTOL:g}; absolute "
                         "tolerance rtol times each state's nominal value)")
     p.add_argument("--method", choices=("DOP853", "Radau", "BDF", "LSODA", "RK45"),
                    help="scipy solve_ivp method (default: Radau if the composed Jacobian has a "
@@ -27,10 +28,9 @@ def register(sub) -> None:
 
 
 def run_reference_command(args) -> int:
-    from ..cli import load_with_options
     from ..cosim.results import check_run_set, figure_png, run_figure
     from ..errors import OptionError
-    from ..reference import solve_reference, write_reference
+    from ..monolithic import solve_reference, write_reference
 
     scene = load_with_options(args)
     if args.rtol <= 0:

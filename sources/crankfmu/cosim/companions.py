@@ -7,14 +7,14 @@ spare core the companions run in a worker process while this process runs the ma
 estimate then costs the slower of the two in wall time instead of their sum.
 
     Companions(jobs)      jobs = 1: each companion runs in this process when its result is
-                          asked for (after the main run), as before; jobs > 1: a pool of
+                          asked for (after the main run); jobs > 1: a pool of
                           jobs - 1 spawned workers (a fresh interpreter each, nothing inherited;
                           the pool starts when the object is made, so its start-up overlaps the
                           parent's own work).
     submit(run, *args) -> Pending; Pending.result() -> run(*args), a CompanionRun
                           (run: a module-level function, cosim.runner.run_companion)
 
-Measured (benchmarks/estimate_cost.py, benchmarks/target.py; README "What it costs"): a worker
+Measured (benchmarks/estimate_cost.py, benchmarks/target.py; docs/error_estimate.md, "What it costs"): a worker
 takes about 0.35 s to start and needs a free core; it pays on runs of a second or more and
 costs more on shorter ones or when the cores are busy, so the command line's default is 1.
 
@@ -24,10 +24,41 @@ loads them (the parent builds them: two processes would otherwise build into one
 """
 from __future__ import annotations
 
-import multiprocessing
+import contextlib
 import os
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
+
+from ..errors import CrankfmuError
+
+# what a script must do for worker processes (multiprocessing's spawn imports the script again
+# in each worker, as the module __mp_main__: its body runs there up to the call that starts them)
+MAIN_GUARD = ("worker processes (jobs > 1) import the calling script again, so a script that "
+              "starts them must make its calls under `if __name__ == \"__main__\":`; or use "
+              "jobs=1, which runs everything in the calling process")
+
+
+class WorkerStartError(CrankfmuError, RuntimeError):
+    """Worker processes could not start (a script without a main guard, MAIN_GUARD)."""
+
+
+@contextlib.contextmanager
+def guarded_start():
+    """Around the call that starts worker processes: multiprocessing's RuntimeError for a
+    process started while a spawned worker is still importing the script (the script's body
+    ran again in the worker, without a main guard) becomes a WorkerStartError saying so."""
+    try:
+        yield
+    except RuntimeError as err:
+        if "bootstrapping phase" not in str(err):
+            raise
+        raise WorkerStartError(f"crankfmu was called while a worker process imported the "
+                               f"script: {MAIN_GUARD}") from None
+
+
+def processes(jobs: int) -> int:
+    """The processes `--jobs N` (and the API's `jobs`) means: N, or one per core for 0
+    (docs/cli.md: one meaning of --jobs for every command)."""
+    return jobs if jobs >= 1 else max(1, os.cpu_count() or 1)
 
 
 @dataclass
@@ -43,15 +74,29 @@ def _ready() -> int:
 
 
 class Pending:
-    """A companion submitted: in a worker (a future) or to run here when asked for."""
+    """A companion submitted: in a worker (a future; `started`, the future of the pool's first
+    task) or to run here when asked for."""
 
-    def __init__(self, future=None, call=None):
+    def __init__(self, future=None, call=None, started=None):
         self._future, self._call, self._done = future, call, None
+        self._started = started
 
     def result(self) -> CompanionRun:
+        """The companion's CompanionRun; WorkerStartError when the worker ended as it started
+        (a script without a main guard)."""
         if self._done is None:
-            self._done = self._future.result() if self._future is not None else self._call()
+            self._done = self._call() if self._future is None else self._from_worker()
         return self._done
+
+    def _from_worker(self) -> CompanionRun:
+        from concurrent.futures.process import BrokenProcessPool
+        try:
+            return self._future.result()
+        except BrokenProcessPool:
+            if self._started.done() and self._started.exception() is None:
+                raise  # the worker started and died in the run
+            raise WorkerStartError(f"the companion runs' worker process ended as it started; "
+                                   f"{MAIN_GUARD}") from None
 
     def cancel(self) -> None:
         if self._future is not None:
@@ -62,17 +107,20 @@ class Companions:
     """Where companion runs execute (module docstring). Use as a context manager."""
 
     def __init__(self, jobs: int = 1):
-        self.jobs = max(1, int(jobs))
+        self.jobs = processes(int(jobs))
         self._pool = None
-        if self.jobs > 1:
+        if self.jobs > 1:  # multiprocessing imported here: a run without workers skips it
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor
             self._pool = ProcessPoolExecutor(max_workers=self.jobs - 1,
                                              mp_context=multiprocessing.get_context("spawn"))
-            self._pool.submit(_ready)  # start the workers now, while the parent loads the FMUs
+            with guarded_start():  # start the workers now, while the parent loads the FMUs
+                self._started = self._pool.submit(_ready)
 
     def submit(self, run, *args) -> Pending:
         if self._pool is None:
             return Pending(call=lambda: run(*args))
-        return Pending(future=self._pool.submit(run, *args))
+        return Pending(future=self._pool.submit(run, *args), started=self._started)
 
     def close(self, abandon: bool = False) -> None:
         """Shut the workers down; `abandon`: stop them even in the middle of a run (the main

@@ -8,17 +8,18 @@ difference between the run and its companion is d = |e(r x) - e(x)| ~ |r^p - 1| 
 
     estimate = d / |r^p - 1|.
 
-`crankfmu run`: one finer companion, at h/2 (fixed step, p = p0 = extrapolation + 1: the
-estimate is d 2^p / (2^p - 1), between 1.07 d and 2 d whatever p is) or at a tenth of a
+`crankfmu run`: one finer companion, at h/2 (fixed step, p = p0 = extrapolation + 1, or
+taylor + 1 for a Taylor coupling: the estimate is d 2^p / (2^p - 1), between 1.03 d and 2 d
+whatever p is) or at a tenth of a
 variable-step master's tolerance (p = 1: about 1.1 d). The finer run is nearer the asymptotic
 range than the run, so d measures the run's own error; coarse companions (2h and 4h, the order
 observed from the three runs) were cheaper but off more often: scripts/error_estimate.py
-measured the variants over the accuracy sweeps (README, "How wrong is a run, without a
-reference"). The `--target` search (cosim/target.py) uses the same form on its own runs.
+measured the variants over the accuracy sweeps (docs/error_estimate.md, "How
+often it is right"). The `--target` search (cosim/target.py) uses the same form on its own runs.
 
 Cost: the companion takes twice the run's communication steps (fixed step) or the steps of a
 tenth of the tolerance (about 10^(1/(extrapolation + 1)) x); the FMUs' own integration does not
-grow with the step count, so the wall time grows less (README). With a spare core it runs in a
+grow with the step count, so the wall time grows less (docs/error_estimate.md). With a spare core it runs in a
 worker beside the run (cosim/companions.py; `crankfmu run --jobs`). When it is wrong: the
 companion counts other events than the run (no estimate, the reason says so) or stops (no
 estimate), the run sits at the FMUs' tolerance floor (the difference is solver noise).
@@ -50,6 +51,10 @@ class Estimate:
     differences: list[float] = field(default_factory=list)  # d(run, c1), d(c1, c2) [1]
     companion_seconds: float = 0.0  # wall time of the companion runs
     reason: str = ""
+    metric: str = ""                # the metric's key (cosim/metrics.py: max, steady, events)
+    metric_description: str = ""    # Metric.describe(): what the error is of, and how formed
+    subject: str = ""               # Metric.subject: what the error is of
+    formula: str = ""               # Metric.formula, with y_ref the exact solution
 
     @property
     def ok(self) -> bool:
@@ -63,29 +68,32 @@ class Estimate:
     def to_json(self) -> dict:
         def num(x):
             return x if isinstance(x, (int, float)) and math.isfinite(x) else None
-        return {"estimated_error": num(self.error), "method": "richardson",
+        return {"estimated_error": num(self.error), "metric": self.metric,
+                "metric_description": self.metric_description, "method": "richardson",
                 "order": num(self.order), "order_source": self.order_source,
                 "ratio": self.ratio, "knob": self.knob,
                 "differences": [num(d) for d in self.differences],
                 "companion_seconds": self.companion_seconds, "reason": self.reason}
 
 
-def nominal_order(extrapolation: int) -> float:
-    """The fixed-step masters' design order: extrapolation p gives global order p + 1."""
-    return float(extrapolation + 1)
-
-
-def order_rule(variable_step: bool, extrapolation: int) -> tuple[float, tuple | None]:
+def order_rule(algorithm: str, extrapolation: int, taylor: int = 0
+               ) -> tuple[float, tuple | None]:
     """(order, bounds of an observed order) of `crankfmu run`'s estimator: one companion, so
-    the order is the design order p0 = extrapolation + 1 (fixed step) or 1 (variable step)."""
-    return (1.0 if variable_step else nominal_order(extrapolation)), None
+    the order is the master's design order p0 (crankfmu.masters.Traits.design_order:
+    extrapolation + 1 at a fixed step, taylor + 1 with a Taylor coupling, 1 at a variable
+    step). ValueError for a monolithic master: it has no coupling error to estimate."""
+    from ..masters import traits
+    order = traits(algorithm).design_order(extrapolation, taylor)
+    if order is None:
+        raise ValueError(f"{algorithm} has no coupling error, so no design order")
+    return order, None
 
 
-def coarse_bounds(extrapolation: int) -> tuple[float, float]:
+def coarse_bounds(algorithm: str, extrapolation: int, taylor: int = 0) -> tuple[float, float]:
     """Bounds of the order observed from companions at 2h and 4h (the --target search):
     [p0, p0 + 1] (Gauss-Seidel and the iterative master gain an order on some scenes; outside
     that range the observed ratio was noise: scripts/error_estimate.py)."""
-    p0 = nominal_order(extrapolation)
+    p0, _ = order_rule(algorithm, extrapolation, taylor)
     return p0, p0 + 1.0
 
 
@@ -117,7 +125,9 @@ def richardson(metric: Metric, runs: list[tuple], ratio: float, knob: str,
     With two companions the order is observed, clamped to `bounds` (default
     [ORDER_MIN, ORDER_MAX]), else `nominal`."""
     lo, hi = bounds or (ORDER_MIN, ORDER_MAX)
-    est = Estimate(ratio=ratio, knob=knob)
+    est = Estimate(ratio=ratio, knob=knob, metric=metric.name,
+                   metric_description=metric.describe(), subject=metric.subject,
+                   formula=metric.formula)
     d1, why = difference(metric, runs[0], runs[1])
     est.differences.append(d1)
     if not math.isfinite(d1):
@@ -139,11 +149,13 @@ def richardson(metric: Metric, runs: list[tuple], ratio: float, knob: str,
     return est
 
 
-def companion_knobs(algorithm_variable_step: bool, step: float, tolerance: float
+def companion_knobs(algorithm: str, step: float, tolerance: float
                     ) -> tuple[str, float, list[float]]:
-    """(knob, ratio, companion values) of `crankfmu run`'s estimate for a run at `step` and
-    `tolerance`: a finer companion, at half the step or a tenth of the tolerance."""
-    if algorithm_variable_step:
+    """(knob, ratio, companion values) of `crankfmu run`'s estimate for a run of the master
+    `algorithm` at `step` and `tolerance`: a finer companion, at half the step or (a
+    variable-step master) a tenth of the tolerance."""
+    from ..masters import traits
+    if traits(algorithm).knob == "tolerance":
         return "tolerance", 1.0 / RATIO_TOLERANCE, [tolerance / RATIO_TOLERANCE]
     return "step", 1.0 / STEP_RATIO, [step / STEP_RATIO]
 
@@ -191,6 +203,7 @@ def format_estimate(est: Estimate) -> str:
         where = f"a companion at {est.ratio:g} x the step"
     else:
         where = f"companions at {est.ratio:g} and {est.ratio ** 2:g} x the step"
-    return (f"estimated error {est.error:.2e} (Richardson from {where}, order {est.order:.2f} "
-            f"{est.order_source}; the companion runs took {est.companion_seconds:.2f} s)"
-            + (f"; {est.reason}" if est.reason else ""))
+    of = f" of {est.subject} ({est.formula})" if est.subject else ""
+    return (f"estimated error {est.error:.2e}{of}: Richardson from {where}, order "
+            f"{est.order:.2f} {est.order_source}; the companion runs took "
+            f"{est.companion_seconds:.2f} s" + (f"; {est.reason}" if est.reason else ""))

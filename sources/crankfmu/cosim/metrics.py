@@ -22,7 +22,7 @@ from __future__ import annotations
 from ..errors import CrankfmuError
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -43,7 +43,7 @@ class ReferenceSamples:
 
     def __init__(self, times: np.ndarray, columns: dict[str, np.ndarray]):
         self.times, self.columns = np.asarray(times, dtype=float), columns
-        self._splines = {}
+        self._splines: dict = {}
 
     def at(self, name: str, t: np.ndarray) -> np.ndarray:
         t = np.asarray(t, dtype=float)
@@ -64,16 +64,30 @@ class Metric:
     name: str
     variables: list[str]
     cycles: int = 1
-    events: list[EventSpec] | None = None
+    events: list[EventSpec] = field(default_factory=list)  # metric events: its figures
 
     def describe(self) -> str:
+        """What the error is, in one line: `formula` over `subject`."""
+        return f"{self.formula} over {self.subject}"
+
+    @property
+    def subject(self) -> str:
+        """What the error is of: the variables, the event figures, a crank's steady state."""
         if self.name == "events":
-            return "max over the event figures of their relative error: " + \
-                "; ".join(s.label for s in self.events)
+            return "the event figures " + "; ".join(s.label for s in self.events)
         if self.name == "max":
-            return f"max_t |y - y_ref| / mean|y_ref| over {', '.join(self.variables)}"
-        return (f"max(rel. error of mean speed, rel. error of delta) over the last "
-                f"{self.cycles} revolution(s) of {self.variables[0].rsplit('.', 1)[0]}")
+            return ", ".join(self.variables)
+        return (f"the last {self.cycles} revolution(s) of "
+                f"{self.variables[0].rsplit('.', 1)[0]}")
+
+    @property
+    def formula(self) -> str:
+        """How the error is formed from a run y and the reference y_ref (relative, [1])."""
+        if self.name == "events":
+            return "max of the relative errors"
+        if self.name == "max":
+            return "max_t |y - y_ref| / mean|y_ref|"
+        return "max(rel. error of mean speed, rel. error of delta)"
 
     def event_details(self, t: np.ndarray, run: dict[str, np.ndarray],
                       ref: ReferenceSamples) -> list[EventError]:

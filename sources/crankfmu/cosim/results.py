@@ -40,10 +40,10 @@ def record_rows(scene) -> int:
     """The most rows a run of `scene` records: a row every [record].interval (rounded to whole
     steps for a fixed-step master, at least min_step apart for a variable-step one), the start
     and the stop."""
-    from ..masters import MASTERS
+    from ..masters import traits
     m, span = scene.master, scene.stop_time - scene.start_time
     interval = scene.record_interval or 0.0
-    if getattr(MASTERS.get(m.algorithm), "variable_step", False):
+    if traits(m.algorithm).variable_step:
         return math.ceil(span / max(interval, m.min_step)) + 2
     steps = max(1, math.ceil(span / m.step - 1e-9))
     return steps // max(1, round((interval or m.step) / m.step)) + 2
@@ -244,6 +244,24 @@ def steady_window(time: np.ndarray, angle: np.ndarray, cycles: int = 3,
     return max(start, float(np.interp(angle[-1] - 2 * np.pi * turns, order, time))), end
 
 
+def no_steady_state(names, rows: np.ndarray, roles: dict) -> str | None:
+    """Why a run has no steady state to draw (it ends before the analysis window
+    [analysis].from_time starts, or turns the crank less than a revolution in it); None when it
+    has one."""
+    t = rows[:, 0]
+    angle = rows[:, 1 + list(names).index(roles["crank_angle"])]
+    from_time = roles.get("from_time")
+    start = float(t[0]) if from_time is None else float(from_time)
+    if len(t) < 2 or t[-1] <= start:
+        return (f"the run ends at t = {float(t[-1]):g} s, before the analysis window "
+                f"([analysis].from_time = {start:g} s)")
+    turned = angle[-1] - float(np.interp(start, t, angle))
+    if turned < 2 * np.pi:
+        return (f"the crank turns {turned / (2 * np.pi):.2g} revolutions after "
+                f"[analysis].from_time = {start:g} s, less than one")
+    return None
+
+
 def steady_figure(names, units, rows: np.ndarray, roles: dict, title: str, reference=None,
                   cycles: int = 3):
     """The periodic steady state: crank speed and drive torque (and the load torque when
@@ -294,11 +312,16 @@ def read_result_csv(path: Path) -> tuple[list[str], np.ndarray]:
 
 def run_figure(recorder: Recorder, title: str, roles: dict | None = None, reference=None):
     """The steady state (steady_figure) when `roles` name a recorded crank angle, speed and
-    drive torque, else one panel per recorded variable, with units, over time."""
+    drive torque and the run reaches a steady state (no_steady_state), else one panel per
+    recorded variable, with units, over time (with a note in the title saying why when the
+    scene has a steady state to show)."""
     if roles and all(roles.get(r) in recorder.names
                      for r in ("crank_angle", "crank_speed", "drive_torque")):
-        return steady_figure(recorder.names, recorder.units, recorder.rows, roles, title,
-                             reference)
+        why = no_steady_state(recorder.names, recorder.rows, roles)
+        if why is None:
+            return steady_figure(recorder.names, recorder.units, recorder.rows, roles, title,
+                                 reference)
+        title = f"{title}\nno steady state to show: {why}"
     return figure(recorder.names, recorder.units, recorder.rows, title)
 
 
@@ -373,6 +396,6 @@ def structured(names, rows: np.ndarray) -> np.ndarray:
     """fmpy's layout: a structured array with the field "time", then one per name."""
     dtype = np.dtype([("time", np.float64)] + [(n, np.float64) for n in names])
     out = np.empty(len(rows), dtype=dtype)
-    for k, name in enumerate(dtype.names):
+    for k, name in enumerate(dtype.names or ()):
         out[name] = rows[:, k]
     return out

@@ -9,6 +9,7 @@ import time
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from fmpy.fmi1 import FMICallException
 from lxml import etree
@@ -16,13 +17,13 @@ from lxml import etree
 from ..errors import CrankfmuError, InterruptedRun
 from ..system.scene import Scene, SceneError, check_run_size
 from ..fmu.instance import FmuInstance, LogCollector
-from ..masters import MASTERS, DivergenceError, OptionError, make_master
+from ..masters import DivergenceError, Master, OptionError, make_master, traits
 from ..masters.inputs import split_at_edges, step_edges
 from .results import (Recorder, check_record_size, check_run_set, column_units, failed_csv,
                       figure_png, normalize_unit, run_figure, versions, write_run_set)
 from .trust import judge_result
 from ..system.wiring import (System, check_components, check_links, check_loops, check_physics,
-                             default_fmu_dir, master_interface, resolve_fmu)
+                             default_fmu_dir, resolve_fmu)
 
 
 class RunError(CrankfmuError, RuntimeError):
@@ -63,7 +64,7 @@ class RunResult:
     coupling_error: dict = field(default_factory=dict)
     metadata: dict = field(default_factory=dict)  # the sidecar's content (also when not written)
     cpu_seconds: float = 0.0  # this process's CPU from initialization to the FMUs' release
-    estimate: object | None = None  # cosim.estimate.Estimate when RunOptions.estimate
+    estimate: Any = None  # cosim.estimate.Estimate when RunOptions.estimate
 
 
 @dataclass
@@ -79,15 +80,16 @@ class RunOptions:
     estimate: bool = False
     # processes for the run and its companions (cosim/companions.py): 1 runs the companions
     # here after the run; 2 runs them in a worker beside it (pays on long runs with a free core:
-    # benchmarks/estimate_cost.py)
+    # benchmarks/estimate_cost.py, benchmarks/jobs.py)
     jobs: int = 1
+    label: str | None = None  # the progress bar's (default: the scene's name)
 
 
 def load_fmus(scene: Scene, fmu_dir: Path, log: LogCollector) -> dict[str, FmuInstance]:
     """Every component's FMU, loaded (FMI 2.0 or 3.0, as the file is) for the interface the
     scene's master steps it through (`interface` of its class: CoSimulation by default)."""
     from ..fmu.instance3 import MODEL_EXCHANGE, open_fmu
-    interface = master_interface(scene.master.algorithm)
+    interface = traits(scene.master.algorithm).interface
     fmus: dict[str, FmuInstance] = {}
     for name in scene.components:
         path = resolve_fmu(scene, name, fmu_dir, model_exchange=interface == MODEL_EXCHANGE)
@@ -123,18 +125,25 @@ def _setup(scene: Scene, fmus: dict[str, FmuInstance], log: LogCollector) -> Non
 def _recorder(scene: Scene, fmus) -> tuple[Recorder, list]:
     names = scene.record
     units = [fmus[r.split(".", 1)[0]].variable(r.split(".", 1)[1]).unit for r in names]
-    readers = []
+    readers: list[tuple] = []
     for comp in dict.fromkeys(r.split(".", 1)[0] for r in names):
         vars_ = [r.split(".", 1)[1] for r in names if r.split(".", 1)[0] == comp]
         readers.append((fmus[comp].reader(vars_), [names.index(f"{comp}.{v}") for v in vars_]))
+    if [k for _, where in readers for k in where] == list(range(len(names))):
+        readers = [(read, None) for read, _ in readers]  # the usual case: the row in order
     return Recorder(names, [normalize_unit(u) for u in units]), readers
 
 
 def _sample(recorder: Recorder, readers, t: float) -> None:
-    row = [0.0] * len(recorder.names)
-    for read, where in readers:
-        for k, v in zip(where, read().tolist()):  # Python floats: cheaper than numpy scalars
-            row[k] = v
+    if readers and readers[0][1] is None:  # each reader's values in turn make the row
+        row = []
+        for read, _ in readers:
+            row += read()  # a list of Python floats
+    else:
+        row = [0.0] * len(recorder.names)
+        for read, where in readers:
+            for k, v in zip(where, read()):
+                row[k] = v
     if not math.isfinite(sum(row)):  # NaN or inf somewhere (or an overflowing sum): find it
         for name, v in zip(recorder.names, row):
             if not math.isfinite(v):
@@ -207,31 +216,42 @@ def _companions(options: RunOptions):
     return Companions(options.jobs)
 
 
+@dataclass
+class LoadedRun:
+    """A scene's FMUs loaded, checked and wired to its master: what stepping needs."""
+    fmus: dict[str, FmuInstance]
+    system: System
+    master: Master
+    recorder: Recorder
+    readers: list             # (read, columns) per component: _sample
+    log: LogCollector
+
+
+@dataclass
+class Stepped:
+    """How stepping a run went: the steps taken, its wall and CPU time (initialization to the
+    FMUs' release), and why it stopped early (`failure`, None for a run that completed) as
+    the sidecar's "outcome": "completed", "failed" or "interrupted"."""
+    steps: int
+    wall_seconds: float
+    cpu_seconds: float
+    failure: str | None = None
+    outcome: str = "completed"
+
+
 def _prepare_and_run(scene, options, out, log, fmu_dir, companions) -> RunResult:
-    fmus = load_fmus(scene, fmu_dir, log)
-    try:
-        check_components(scene, fmus)
-        links = check_links(scene, fmus)
-        check_physics(scene, fmus)
-        system = System(scene, fmus, links)
-        try:
-            master = make_master(scene.master.algorithm, system, scene.master)
-        except OptionError as err:  # an option set in code, checked against its declaration
-            key, _, message = str(err).partition(": ")
-            raise SceneError(scene.path, key, message) from None
-        except ValueError as err:  # e.g. an FMU that cannot roll back, for a master that must
-            raise SceneError(scene.path, "[master]", str(err)) from None
-        check_loops(scene, fmus, links, master)
-        recorder, readers = _recorder(scene, fmus)
-    except BaseException:
-        close_fmus(fmus)
-        raise
+    """Load, step, and turn the stepping into the run's result and files (a run that stopped
+    early writes its rows and raises RunError: _stop)."""
+    loaded = _load(scene, fmu_dir, log)
     # the FMUs are built now: the companions can load them beside this run
-    pending = submit_companions(scene, fmu_dir, companions) if companions is not None else None
+    pending = submit_companions(scene, fmu_dir, companions, options.progress) \
+        if companions is not None else None
     try:
-        with _Interrupt() as interrupt:
-            result = _run(scene, options, out, log, fmus, system, master, recorder, readers,
-                          interrupt)
+        with _Interrupt() as interrupt:  # Ctrl-C counted, not raised, until the rows are out
+            stepped = _step(scene, loaded, options, interrupt)
+            result = _run_result(scene, loaded, stepped, options.extra_sidecar)
+            if stepped.failure:
+                _stop(out, result, stepped)
     except BaseException:
         for _, companion in pending or ():
             companion.cancel()
@@ -253,6 +273,30 @@ def _prepare_and_run(scene, options, out, log, fmu_dir, companions) -> RunResult
     return result
 
 
+def _load(scene: Scene, fmu_dir, log: LogCollector) -> LoadedRun:
+    """The scene's FMUs loaded and checked against it, wired into a System, its master made
+    and the recorder ready; the FMUs are released if anything fails."""
+    fmus = load_fmus(scene, fmu_dir, log)
+    try:
+        check_components(scene, fmus)
+        links = check_links(scene, fmus)
+        check_physics(scene, fmus)
+        system = System(scene, fmus, links)
+        try:
+            master = make_master(scene.master.algorithm, system, scene.master)
+        except OptionError as err:  # an option set in code, checked against its declaration
+            key, _, message = str(err).partition(": ")
+            raise SceneError(scene.path, key, message) from None
+        except ValueError as err:  # e.g. an FMU that cannot roll back, for a master that must
+            raise SceneError(scene.path, "[master]", str(err)) from None
+        check_loops(scene, fmus, links, master)
+        recorder, readers = _recorder(scene, fmus)
+    except BaseException:
+        close_fmus(fmus)
+        raise
+    return LoadedRun(fmus, system, master, recorder, readers, log)
+
+
 def _add_estimate(scene: Scene, fmu_dir, result: RunResult, pending: list) -> None:
     """Collect the companions, put the estimate in the result's metadata."""
     from .estimate import recorder_series
@@ -260,60 +304,73 @@ def _add_estimate(scene: Scene, fmu_dir, result: RunResult, pending: list) -> No
     result.metadata["error_estimate"] = result.estimate.to_json()
 
 
-def _run(scene, options, out, log, fmus, system, master, recorder, readers, interrupt):
-    h, t0 = scene.master.step, scene.start_time
+def _step(scene: Scene, run: LoadedRun, options: RunOptions, interrupt) -> Stepped:
+    """Initialize the FMUs and step the master to the stop time, recording rows; a failure
+    (divergence, an FMU call, a value that is not finite) or Ctrl-C ends the stepping with the
+    rows so far and says why (Stepped.failure). The FMUs are released in any case."""
+    master, t0 = run.master, scene.start_time
     wall, cpu = time.perf_counter(), time.process_time()
     failure = outcome = None
     step, t = 0, t0
     try:
-        _setup(scene, fmus, log)
+        _setup(scene, run.fmus, run.log)
         master.initialize(t0)
-        _sample(recorder, readers, t0)
+        _sample(run.recorder, run.readers, t0)
         loop = _variable_steps if master.variable_step else _fixed_steps
-        for step, t, t_new, record in loop(master, scene, options.progress):
+        for step, t, t_new, record in loop(master, scene, options.progress, options.label):
             if interrupt.requested:
                 break
             master.check_finite(t_new)
             if record:
-                _sample(recorder, readers, t_new)
-        if interrupt.requested:
-            failure, outcome = f"interrupted (Ctrl-C) at t = {master.time or t0:.6g} s", \
-                "interrupted"
+                _sample(run.recorder, run.readers, t_new)
     except DivergenceError as err:
         failure, outcome = str(err), "failed"
     except FMICallException as err:
-        failure, outcome = _fmi_failure(err, fmus, log, master.time if master.time is not None
-                                        else t), "failed"
+        failure, outcome = _fmi_failure(err, run.fmus, run.log, master.time
+                                        if master.time is not None else t), "failed"
     except (ArithmeticError, ValueError, RuntimeError, OSError) as err:  # say it, keep the rows
         failure, outcome = f"stopped near t = {master.time or t:.6g} s: " \
                            f"{type(err).__name__}: {err}", "failed"
     finally:
         wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
-        close_fmus(fmus)
+        close_fmus(run.fmus)
     if interrupt.requested and not failure:
         failure, outcome = f"interrupted (Ctrl-C) at t = {master.time or t0:.6g} s", "interrupted"
+    return Stepped(step, wall, cpu, failure, outcome or "completed")
+
+
+def _run_result(scene: Scene, run: LoadedRun, stepped: Stepped, extra_sidecar: dict
+                ) -> RunResult:
+    """The run's result with the sidecar's content (metadata), nothing written yet."""
+    master, m = run.master, scene.master
     statistics = master.statistics()
-    m = scene.master
     metadata = {
-        "scene": str(scene.path), "name": scene.name, "status": failure or "completed",
-        "outcome": outcome or "completed", "rows": recorder.count,
-        "units": column_units(recorder),
-        "start_time": t0, "stop_time": scene.stop_time,
-        "master": {**m.resolved(), "step": h, "order": system.order},  # its declared options
+        "scene": str(scene.path), "name": scene.name, "status": stepped.failure or "completed",
+        "outcome": stepped.outcome, "rows": run.recorder.count,
+        "units": column_units(run.recorder),
+        "start_time": scene.start_time, "stop_time": scene.stop_time,
+        "master": {**m.resolved(), "step": m.step, "order": run.system.order},  # its options
         "components": {n: {"fmu": str(f.path), "parameters": scene.components[n].parameters,
-                           "effects": scene.components[n].effects} for n, f in fmus.items()},
-        "versions": versions(), "wall_seconds": wall, "cpu_seconds": cpu,
-        "communication_steps": step,
+                           "effects": scene.components[n].effects}
+                       for n, f in run.fmus.items()},
+        "versions": versions(), "wall_seconds": stepped.wall_seconds,
+        "cpu_seconds": stepped.cpu_seconds, "communication_steps": stepped.steps,
         "statistics": statistics, "master_statistics": master.master_statistics(),
-        "coupling_error": master.coupling_error(), **options.extra_sidecar}
-    result = RunResult(None, None, None, recorder, statistics, wall, step,
-                       master.master_statistics(), master.coupling_error(), metadata, cpu)
-    if failure:
-        csv = None
-        if out is not None:
-            csv, result.sidecar, _ = write_run_set(partial_paths(out)[0], recorder, metadata)
-        raise (RunInterrupted if outcome == "interrupted" else RunError)(failure, csv)
-    return result
+        "coupling_error": master.coupling_error(), **extra_sidecar}
+    return RunResult(None, None, None, run.recorder, statistics, stepped.wall_seconds,
+                     stepped.steps, master.master_statistics(), master.coupling_error(),
+                     metadata, stepped.cpu_seconds)
+
+
+def _stop(out: Path | None, result: RunResult, stepped: Stepped) -> None:
+    """A run that stopped early: its rows so far written beside any earlier result
+    (partial_paths), then RunError (RunInterrupted for Ctrl-C) saying why and where."""
+    csv = None
+    if out is not None:
+        csv, result.sidecar, _ = write_run_set(partial_paths(out)[0], result.recorder,
+                                               result.metadata)
+    raise (RunInterrupted if stepped.outcome == "interrupted" else RunError)(
+        stepped.failure or stepped.outcome, csv)
 
 
 def _write_result(scene: Scene, options: RunOptions, out: Path | None, result: RunResult,
@@ -336,14 +393,15 @@ def _write_result(scene: Scene, options: RunOptions, out: Path | None, result: R
 FLOOR_FACTOR = 10.0  # an estimate below this x fmu_tolerance is flagged (the studies' floor)
 
 
-def run_companion(scene, fmu_dir):
+def run_companion(scene, fmu_dir, progress: bool | None = False, label: str | None = None):
     """One companion run, no files written: a CompanionRun (module level: a worker of
-    cosim.companions calls it)."""
+    cosim.companions calls it). `progress`, `label`: its bar (RunOptions)."""
     from .companions import CompanionRun
     from .estimate import recorder_series
     t0 = time.perf_counter()
     try:
-        result = run_scene(scene, RunOptions(out=None, fmu_dir=fmu_dir, progress=False))
+        result = run_scene(scene, RunOptions(out=None, fmu_dir=fmu_dir, progress=progress,
+                                             label=label))
     except InterruptedRun:  # Ctrl-C: the user's, not a companion that stopped on its own
         raise
     except CrankfmuError as err:  # RunError (it stopped) or a refused setting (too many steps)
@@ -352,16 +410,18 @@ def run_companion(scene, fmu_dir):
                         result=result)
 
 
-def submit_companions(scene, fmu_dir, companions) -> list:
+def submit_companions(scene, fmu_dir, companions, progress: bool | None = False) -> list:
     """Start the companion runs of `scene`'s estimate (its master at half the step, or at a
-    tenth of a variable-step master's tolerance): [(knob value, Pending)]."""
+    tenth of a variable-step master's tolerance): [(knob value, Pending)]. `progress`: a bar
+    for each companion that runs here (companions.jobs 1), after the run's own."""
     from .estimate import companion_knobs, companion_scene
     m = scene.master
-    if not _co_simulation(m.algorithm):
+    if traits(m.algorithm).monolithic:
         return []
-    variable = bool(getattr(MASTERS.get(m.algorithm), "variable_step", False))
-    knob, _, values = companion_knobs(variable, m.step, m.tolerance)
-    return [(v, companions.submit(run_companion, companion_scene(scene, knob, v), fmu_dir))
+    knob, _, values = companion_knobs(m.algorithm, m.step, m.tolerance)
+    here = progress if companions.jobs == 1 else False
+    return [(v, companions.submit(run_companion, companion_scene(scene, knob, v), fmu_dir, here,
+                                  f"{scene.name}: error estimate, companion at {knob} {v:g}"))
             for v in values]
 
 
@@ -373,12 +433,11 @@ def estimate_run(scene, run_series: tuple, fmu_dir=None, pending: list | None = 
     from .estimate import Estimate, companion_knobs, order_rule, richardson, scene_metric
     from .metrics import MetricError
     m = scene.master
-    if not _co_simulation(m.algorithm):
+    if traits(m.algorithm).monolithic:
         return Estimate(reason=f"{m.algorithm} has no coupling error to estimate: the FMUs are "
                                f"integrated as one ODE, to its solver's tolerance (compare "
                                f"with `crankfmu reference`)")
-    variable = bool(getattr(MASTERS.get(m.algorithm), "variable_step", False))
-    knob, ratio, _ = companion_knobs(variable, m.step, m.tolerance)
+    knob, ratio, _ = companion_knobs(m.algorithm, m.step, m.tolerance)
     try:
         metric = scene_metric(scene)
     except MetricError as err:
@@ -394,20 +453,14 @@ def estimate_run(scene, run_series: tuple, fmu_dir=None, pending: list | None = 
                             reason=f"the companion run at {knob} {value:g} stopped: "
                                    f"{run.reason}")
         series.append(run.series)
-    est = richardson(metric, series, ratio, knob, *order_rule(variable, m.extrapolation))
+    est = richardson(metric, series, ratio, knob,
+                     *order_rule(m.algorithm, m.extrapolation, m.taylor))
     est.companion_seconds = seconds
     if est.ok and est.error < FLOOR_FACTOR * m.fmu_tolerance:  # say it: no number hides it
         est.reason = "; ".join(filter(None, [est.reason, (
             f"below {FLOOR_FACTOR:g} x fmu_tolerance: the FMUs' own solver error, which a "
             f"companion with the same fmu_tolerance does not see, may be larger")]))
     return est
-
-
-def _co_simulation(algorithm: str) -> bool:
-    """Does the master co-simulate (step the FMUs), as opposed to integrating their Model
-    Exchange interfaces as one ODE?"""
-    from ..fmu.instance3 import CO_SIMULATION
-    return master_interface(algorithm) == CO_SIMULATION
 
 
 def plot_roles(scene: Scene) -> dict | None:
@@ -434,7 +487,7 @@ def _reference_beside(out: Path, recorder: Recorder):
     return (names, rows) if set(recorder.names) <= set(names) and len(rows) > 1 else None
 
 
-def _fixed_steps(master, scene: Scene, progress):
+def _fixed_steps(master, scene: Scene, progress, label: str | None = None):
     """Steps of [master].step on the grid t0 + k h (the last one shortened to end at
     stop_time); yields (step, t, t_new, record?) with rows every [record].interval. A grid step
     across an edge of a step-table input is taken in pieces that end at the edge
@@ -445,16 +498,20 @@ def _fixed_steps(master, scene: Scene, progress):
     n_steps = max(1, math.ceil((stop - t0) / h - 1e-9))
     every = max(1, round((scene.record_interval or h) / h))
     edges = step_edges(master.system)
-    for step in _progress(range(1, n_steps + 1), progress, scene.name):
+    advance = master.step
+    for step in _progress(range(1, n_steps + 1), progress, label or scene.name):
         t = t0 + (step - 1) * h
-        start = t
-        for piece in split_at_edges(t, min(h, stop - t), edges):
-            master.step(start, piece)
-            start += piece
+        if edges:
+            start = t
+            for piece in split_at_edges(t, min(h, stop - t), edges):
+                advance(start, piece)
+                start += piece
+        else:  # no step table: the grid step whole (what split_at_edges gives)
+            advance(t, min(h, stop - t))
         yield step, t, min(t0 + step * h, stop), step % every == 0 or step == n_steps
 
 
-def _variable_steps(master, scene: Scene, progress):
+def _variable_steps(master, scene: Scene, progress, label: str | None = None):
     """Steps the master chooses (`next_step`); a row at every accepted point at least
     [record].interval after the last row (every accepted point without an interval), and at
     stop_time. A step that would leave less than min_step before stop_time is stretched to it."""
@@ -462,7 +519,7 @@ def _variable_steps(master, scene: Scene, progress):
     min_step = scene.master.min_step  # a variable-step master's declared option
     interval = scene.record_interval or 0.0
     last_row, step = t, 0
-    bar = _progress(None, progress, scene.name, total=stop - t)
+    bar = _progress(None, progress, label or scene.name, total=stop - t)
     while t < stop:
         h = master.next_step
         if t + h > stop - min_step:

@@ -1,10 +1,12 @@
-"""`crankfmu run SCENE --target TOL`: choose master, extrapolation and step for a requested
-global error without a reference, from the error estimate (cosim/estimate.py).
+"""`crankfmu run SCENE --target TOL`: choose master, coupling (extrapolation or a Taylor
+coupling's order) and step for a requested global error without a reference, from the error
+estimate (cosim/estimate.py).
 
 Fixed-step masters: the steps tried are rungs h0 / 2^k of one ladder, h0 = the scene's step x
 START_FACTOR (halved until the run has MIN_START_STEPS steps). Each round runs a candidate
 step h and its companion h/2 and estimates the candidate's error as `crankfmu run` does
-(Richardson with the design order p0 = extrapolation + 1: cosim.estimate.richardson). The
+(Richardson with the design order p0 = extrapolation + 1, or taylor + 1:
+cosim.estimate.richardson). The
 search accepts the first candidate whose estimate meets the target and writes that run as it
 ran (no run is repeated); otherwise it predicts the halvings that would bring the error to
 target x SAFETY (with the order observed from three consecutive rungs once there are three,
@@ -14,13 +16,16 @@ already meets the target, three or four otherwise.
 (The search used to estimate from the coarser rungs 2h and 4h, which costs no extra run but was
 right less often: on the conventional press and the clutch hammer it accepted runs 1.7x and
 1.4x above the target. The companion at h/2 is the form measured within 3x in 96 % of the
-sweeps' runs: README, "How wrong is a run".)
+sweeps' runs: docs/error_estimate.md.)
 With jobs > 1 a round's two runs go side by side, the finer (slower) here and the other in a
 worker process (cosim/companions.py): the same runs and the same choice, in the wall time of
 the slower one.
-Candidates, in order: the scene's master with extrapolation 2, then Gauss-Seidel with
-extrapolation 2 and 1 (the next is tried when one cannot meet the target). A variable-step
-master in the scene is searched over its tolerance instead (companion at a tenth of it).
+Candidates, in order: where every FMU with connected outputs offers their derivatives
+(cosim/coupling.py), the scene's master with a Taylor coupling of order TAYLOR_ORDER (Gauss-Seidel
+if that master does not take the option); then the scene's master with extrapolation 2, then
+Gauss-Seidel with extrapolation 2 and 1 (the next is tried when one cannot meet the target). A
+variable-step master in the scene is searched over its tolerance instead (companion at a tenth
+of it).
 
 It cannot meet the target when every candidate stops (diverges, events differ between rungs) or
 its estimate stops falling with the step (the FMUs' tolerance floor, events that move with the
@@ -31,11 +36,12 @@ from __future__ import annotations
 import copy
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from ..errors import CrankfmuError
 
-from .estimate import (STEP_RATIO, Estimate, difference, nominal_order, richardson,
+from .estimate import (STEP_RATIO, Estimate, difference, order_rule, richardson,
                        scene_metric, with_metric_record)
 
 START_FACTOR = 32.0      # the first step, x the scene's step (the sweep's coarsest): measured
@@ -48,6 +54,9 @@ MAX_TOLERANCE_TRIES = 6  # variable-step master: tolerance updates
 MAX_STEP_RUNS = 8        # fixed-step master: rounds (candidate and companion) per candidate
 MAX_HALVINGS = 4         # the largest jump of the step at once: / 2^4
 MIN_START_STEPS = 16     # the coarse start takes at least this many steps
+TAYLOR_ORDER = 3         # the Taylor candidate's order: the servo press's cheapest setting
+                         # for 1e-5 (docs/accuracy_tables.md: Gauss-Seidel, taylor 3, 2 ms);
+                         # over whole scenes 4 gains little (orders there about 3)
 
 
 class TargetNotMet(CrankfmuError):
@@ -60,17 +69,20 @@ class TargetReport:
     met: bool = False
     algorithm: str = ""
     extrapolation: int = 0
+    taylor: int = 0
     step: float = math.nan
     tolerance: float = math.nan
     estimate: Estimate | None = None
-    runs: list = field(default_factory=list)  # (algorithm, extrapolation, step, tol, seconds)
+    runs: list = field(default_factory=list)  # (algorithm, extrapolation, taylor, step,
+    #                                               tolerance, seconds)
     wall_seconds: float = 0.0
     reasons: list = field(default_factory=list)
-    echo: object = None  # a callable taking a line of progress (the command line prints it)
+    echo: Callable[[str], None] | None = None  # a line of progress (the command line prints it)
 
-    def add_run(self, algorithm, extrapolation, step, tolerance, seconds, how="") -> None:
-        self.runs.append((algorithm, extrapolation, step, tolerance, seconds))
-        self.say(f"run {len(self.runs)}: {algorithm}, extrapolation {extrapolation}, "
+    def add_run(self, algorithm, coupling, step, tolerance, seconds, how="") -> None:
+        """coupling: (extrapolation, taylor)."""
+        self.runs.append((algorithm, *coupling, step, tolerance, seconds))
+        self.say(f"run {len(self.runs)}: {algorithm}, {coupling_text(coupling)}, "
                  f"{how or f'step {step:g} s'}: {seconds:.2f} s")
 
     def say(self, line: str) -> None:
@@ -83,14 +95,27 @@ class TargetReport:
 
     def to_json(self) -> dict:
         return {"target": self.target, "met": self.met, "algorithm": self.algorithm,
-                "extrapolation": self.extrapolation, "step": self.step,
+                "extrapolation": self.extrapolation, "taylor": self.taylor, "step": self.step,
                 "tolerance": self.tolerance, "search_wall_seconds": self.wall_seconds,
                 "runs": [list(r) for r in self.runs], "reasons": self.reasons}
 
 
-def candidates(scene) -> list[tuple[str, int]]:
-    first = (scene.master.algorithm, 2)
-    return list(dict.fromkeys([first, ("gauss-seidel", 2), ("gauss-seidel", 1)]))
+def coupling_text(coupling: tuple[int, int]) -> str:
+    extrapolation, taylor = coupling
+    return f"taylor {taylor}" if taylor else f"extrapolation {extrapolation}"
+
+
+def candidates(scene, taylor: int = 0) -> list[tuple[str, tuple[int, int]]]:
+    """(algorithm, (extrapolation, taylor)) in the order tried (module docstring); `taylor`:
+    the Taylor order the scene's FMUs offer, 0 for none."""
+    from ..masters import MASTERS
+    first = scene.master.algorithm
+    found = []
+    if taylor:
+        takes = "taylor" in {o.name for o in getattr(MASTERS.get(first), "options", ())}
+        found.append((first if takes else "gauss-seidel", (0, taylor)))
+    found += [(first, (2, 0)), ("gauss-seidel", (2, 0)), ("gauss-seidel", (1, 0))]
+    return list(dict.fromkeys(found))
 
 
 def search(scene, target: float, fmu_dir=None, jobs: int = 1, echo=None):
@@ -98,7 +123,7 @@ def search(scene, target: float, fmu_dir=None, jobs: int = 1, echo=None):
     with the report's reasons when no candidate meets the target. `jobs` > 1: the companions
     of each run execute in worker processes beside it (cosim/companions.py). `echo`: called
     with a line after each run and each estimate (progress)."""
-    from ..masters import MASTERS
+    from ..masters import traits
     from .companions import Companions
     if not (target > 0 and math.isfinite(target)):
         raise ValueError(f"--target must be a positive number, got {target!r}")
@@ -108,14 +133,16 @@ def search(scene, target: float, fmu_dir=None, jobs: int = 1, echo=None):
     pool = Companions(jobs)  # its workers start while the FMUs are checked
     try:
         fmu_dir = _built_fmus(scene, fmu_dir)
-        for algorithm, extrapolation in candidates(scene):
-            variable = bool(getattr(MASTERS.get(algorithm), "variable_step", False))
-            walk = _tolerance_walk if variable else _step_ladder
-            found = walk(scene, algorithm, extrapolation, target, fmu_dir, report, pool)
+        from .coupling import taylor_orders_offered
+        offered = taylor_orders_offered(scene, fmu_dir, (TAYLOR_ORDER,))
+        for algorithm, coupling in candidates(scene, offered[0] if offered else 0):
+            walk = _tolerance_walk if traits(algorithm).variable_step else _step_ladder
+            found = walk(scene, algorithm, coupling, target, fmu_dir, report, pool)
             if found is not None:
                 result, est, trial = found
                 report.met = True
-                report.algorithm, report.extrapolation = algorithm, extrapolation
+                report.algorithm = algorithm
+                report.extrapolation, report.taylor = coupling
                 report.step, report.tolerance = trial.master.step, trial.master.tolerance
                 report.estimate = est
                 result.estimate = est
@@ -138,10 +165,14 @@ def _built_fmus(scene, fmu_dir):
     return fmu_dir
 
 
-def _trial(scene, algorithm, extrapolation, step=None, tolerance=None):
+def _trial(scene, algorithm, coupling, step=None, tolerance=None):
     trial = copy.deepcopy(scene)
     m = trial.master
-    m.algorithm, m.extrapolation = algorithm, extrapolation
+    m.algorithm, m.extrapolation = algorithm, coupling[0]
+    if coupling[1]:
+        m.taylor = coupling[1]
+    else:  # not set: a master that does not take the option (iterative) would refuse it
+        m.options.pop("taylor", None)
     if step is not None:
         m.step = step
     if tolerance is not None:
@@ -155,16 +186,17 @@ def _run(trial, fmu_dir, report, how: str = ""):
     from .runner import run_companion
     done = run_companion(trial, fmu_dir)
     m = trial.master
-    report.add_run(m.algorithm, m.extrapolation, m.step, m.tolerance, done.wall_seconds, how)
+    report.add_run(m.algorithm, (m.extrapolation, m.taylor), m.step, m.tolerance,
+                   done.wall_seconds, how)
     return done
 
 
-def _step_ladder(scene, algorithm, extrapolation, target, fmu_dir, report, pool):
+def _step_ladder(scene, algorithm, coupling, target, fmu_dir, report, pool):
     """The step search (module docstring); (result, estimate, trial) or None. Steps are
     h0 / 2^k; `rungs` maps k to the run's (series, result)."""
     metric = scene_metric(scene)
-    label = f"{algorithm}, extrapolation {extrapolation}"
-    nominal = nominal_order(extrapolation)
+    label = f"{algorithm}, {coupling_text(coupling)}"
+    nominal, _ = order_rule(algorithm, *coupling)
     h_min = scene.master.step * MIN_STEP_FACTOR
     # at least MIN_START_STEPS steps over the run: a step longer than the run is no step
     # (a power of 2 x the scene's step, so the steps tried are those of the accuracy sweep)
@@ -177,7 +209,7 @@ def _step_ladder(scene, algorithm, extrapolation, target, fmu_dir, report, pool)
         if h0 / 2 ** (k + 1) < h_min * (1 - 1e-9):
             return _fail(report, f"{label}: the step would fall below {h_min:g} s "
                                  f"({MIN_STEP_FACTOR:g} x the scene's step)")
-        ran = _run_rungs(scene, algorithm, extrapolation, h0,
+        ran = _run_rungs(scene, algorithm, coupling, h0,
                          [j for j in (k, k + 1) if j not in rungs], fmu_dir, report, pool)
         if isinstance(ran.get(k), str) and not math.isfinite(last_error):
             # an unstable coarse start: below the finest rung that stopped (a companion that
@@ -195,7 +227,7 @@ def _step_ladder(scene, algorithm, extrapolation, target, fmu_dir, report, pool)
         report.say_estimate(f"step {h:g} s", est)
         if est.ok and est.error <= target:
             est.companion_seconds = rungs[k + 1][1].wall_seconds
-            return rungs[k][1], est, _trial(scene, algorithm, extrapolation, step=h)
+            return rungs[k][1], est, _trial(scene, algorithm, coupling, step=h)
         if not est.ok:  # e.g. the companion counts other events: both too coarse
             k += 1
             continue
@@ -222,27 +254,27 @@ def _prediction_order(metric, rungs: dict, k: int, nominal: float) -> float:
     return min(nominal + 1.0, max(1.0, math.log2(d_coarse / d_fine)))
 
 
-def _run_rungs(scene, algorithm, extrapolation, h0, ks, fmu_dir, report, pool) -> dict:
+def _run_rungs(scene, algorithm, coupling, h0, ks, fmu_dir, report, pool) -> dict:
     """Runs at the steps h0 / 2^k, k in ks: the finest (the slowest) here, the others in the
     pool's workers beside it (cosim/companions.py). {k: (series, result)}, or for a run that
     stopped {k: the reason}."""
     from .runner import run_companion
     finest = max(ks)
-    pending = {k: pool.submit(run_companion, _trial(scene, algorithm, extrapolation,
+    pending = {k: pool.submit(run_companion, _trial(scene, algorithm, coupling,
                                                     step=h0 / 2 ** k), fmu_dir)
                for k in ks if k != finest}
-    ran = {finest: _rung(scene, algorithm, extrapolation, h0 / 2 ** finest, fmu_dir, report)}
+    ran = {finest: _rung(scene, algorithm, coupling, h0 / 2 ** finest, fmu_dir, report)}
     for k, companion in pending.items():
         done = companion.result()
-        report.add_run(algorithm, extrapolation, h0 / 2 ** k, scene.master.tolerance,
+        report.add_run(algorithm, coupling, h0 / 2 ** k, scene.master.tolerance,
                        done.wall_seconds)
         ran[k] = _rung_of(done, h0 / 2 ** k)
     return ran
 
 
-def _rung(scene, algorithm, extrapolation, h, fmu_dir, report):
+def _rung(scene, algorithm, coupling, h, fmu_dir, report):
     """(series, result) of a run at step h here, or the reason it stopped."""
-    return _rung_of(_run(_trial(scene, algorithm, extrapolation, step=h), fmu_dir, report), h)
+    return _rung_of(_run(_trial(scene, algorithm, coupling, step=h), fmu_dir, report), h)
 
 
 def _rung_of(done, h: float):
@@ -265,14 +297,14 @@ def _halvings(error: float, order: float, target: float) -> int:
     return min(MAX_HALVINGS, max(1, k))
 
 
-def _tolerance_walk(scene, algorithm, extrapolation, target, fmu_dir, report, pool):
+def _tolerance_walk(scene, algorithm, coupling, target, fmu_dir, report, pool):
     """A variable-step master: tolerance from the target, tightened by the estimate's ratio;
     each run's companion (a tenth of its tolerance) runs in the pool beside it."""
     from .runner import estimate_run, submit_companions
-    label = f"{algorithm}, extrapolation {extrapolation}"
+    label = f"{algorithm}, {coupling_text(coupling)}"
     tol = target
     for _ in range(MAX_TOLERANCE_TRIES):
-        trial = _trial(scene, algorithm, extrapolation, tolerance=tol)
+        trial = _trial(scene, algorithm, coupling, tolerance=tol)
         pending = submit_companions(trial, fmu_dir, pool)
         done = _run(trial, fmu_dir, report, how=f"tolerance {tol:g}")
         if done.result is None:
@@ -283,7 +315,7 @@ def _tolerance_walk(scene, algorithm, extrapolation, target, fmu_dir, report, po
             return None
         result = done.result
         est = estimate_run(trial, done.series, fmu_dir, pending)
-        report.add_run(algorithm, extrapolation, trial.master.step, pending[0][0],
+        report.add_run(algorithm, coupling, trial.master.step, pending[0][0],
                        est.companion_seconds, how=f"tolerance {pending[0][0]:g} (companion)")
         report.say_estimate(f"tolerance {tol:g}", est)
         if not est.ok:
@@ -306,6 +338,7 @@ def write_chosen(scene, result, report: TargetReport, out, plot_png: bool = Fals
     from .results import figure_png, run_figure, write_run_set
     from .runner import plot_roles
     from .trust import judge_result
+    assert report.estimate is not None  # the search's accepted estimate (a met target)
     result.estimate = report.estimate
     result.metadata["error_estimate"] = report.estimate.to_json()
     result.metadata["target"] = report.to_json()

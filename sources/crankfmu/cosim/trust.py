@@ -20,8 +20,8 @@ A run is marked `unreliable` (sidecar "status" and "outcome", `Result.status`; t
 
 The limits were chosen from scripts/large_steps.py: every shipped scene with Gauss-Seidel,
 Jacobi and the iterative master (the scene's extrapolation) at 1, 2, 4, 8, 16 and 32 x its
-step, 234 runs, each against the monolithic reference in the scene's metric (README, "When a
-run is marked unreliable"):
+step, 234 runs, each against the monolithic reference in the scene's metric (docs/error_estimate.md,
+"When a run is marked unreliable"):
 
     at their own settings the shipped scenes' estimates are at most 4.1e-3 (the speed loop)
     and their port mismatches at most 1.4e-4: 24 and 700 times below the limits;

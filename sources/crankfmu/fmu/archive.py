@@ -32,6 +32,7 @@ import threading
 import time
 import zipfile
 from pathlib import Path
+from typing import Any
 
 MAX_FMU_UNPACKED_BYTES = 1 << 30  # an FMU's files together, as its zip directory declares them
 MAX_MEMBER_NAME_BYTES = 1024      # a member's name in the zip; a part of it at most NAME_MAX
@@ -284,7 +285,7 @@ def _evict(root: Path, keep: Path) -> None:
             shutil.rmtree(entry.path, ignore_errors=True)
 
 
-def load_fmu(path: Path) -> tuple[str, object]:
+def load_fmu(path: Path) -> tuple[str, Any]:
     """(unpacked folder, model description) of the FMU file at `path`, checked, once per FMU
     content in this process (see the module's docstring). Refusals are FmuRefused (a
     ValueError); a file that is not a zip raises zipfile.BadZipFile."""

@@ -361,7 +361,9 @@ def report(path: Path, problems: list[str]) -> None:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--dest", type=Path, default=Path("fmus"), help="output folder")
+    parser.add_argument("--dest", type=Path, default=Path("fmus"), metavar="DIR",
+                        help="folder the FMI 2.0 FMUs are written to (default fmus/; FMI 3.0 "
+                             "ones go to DIR/fmi3/)")
     parser.add_argument("models", nargs="*", help=f"FMUs to build (default all: "
                                                   f"{', '.join(FMU_MODELS)})")
 

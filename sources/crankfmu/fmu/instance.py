@@ -10,12 +10,11 @@ import ctypes
 import os
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi2 import FMU2Slave, fmi2Real, fmi2ValueReference
+from fmpy.fmi2 import FMU2Slave, fmi2FMUstate, fmi2Real, fmi2ValueReference
 
 from .archive import load_fmu
 
@@ -61,7 +60,7 @@ def release_pythonfmu_states() -> int:
         try:  # RTLD_NOLOAD: only a handle to the already loaded copy, never a new load
             lib = ctypes.CDLL(os.fsdecode(name), mode=os.RTLD_NOLOAD | os.RTLD_LAZY)
             release = lib.finalizePythonInterpreter
-            lib.fmi2Instantiate  # a pythonfmu FMU binary, not some other library
+            lib.fmi2Instantiate  # noqa: B018 - a probe: a pythonfmu FMU binary, not some other library
         except (OSError, AttributeError):
             continue
         release.restype = None
@@ -107,6 +106,7 @@ class FmuInstance:
         self.slave.instantiate(loggingOn=logging_on,
                                callbacks=None if self._log is None else self._log.callbacks)
         self._component = self.slave.component
+        self._fmi2_do_step = self.slave._functions["fmi2DoStep"]  # raw ctypes, as in reader
 
     def setup(self, start_time: float, stop_time: float, tolerance: float) -> None:
         self.slave.setupExperiment(tolerance=tolerance, startTime=start_time, stopTime=stop_time)
@@ -139,19 +139,22 @@ class FmuInstance:
                 self.slave.setReal([var.valueReference], [float(value)])
 
     def reader(self, names: list[str]):
-        """A function returning the current values of `names` as a numpy array (a view of one
-        reused buffer: copy it to keep it)."""
+        """A function returning the current values of `names` as a new list of Python floats
+        (a master keeps what it reads; the list costs less than a numpy array of a few
+        values)."""
         n = len(names)
+        if not n:
+            return list  # nothing to read: a new empty list per call
         vrs = (fmi2ValueReference * n)(*[self.variable(v).valueReference for v in names])
         buf = (fmi2Real * n)()
-        out = np.ctypeslib.as_array(buf)
+        values = memoryview(buf).cast("B").cast("d")  # tolist() costs half of buf[:]
         get = self.slave._functions["fmi2GetReal"]  # raw ctypes: fmpy's wrapper costs ~2 us
 
-        def read() -> np.ndarray:
-            status = get(self._component, vrs, n, buf) if n else 0
+        def read() -> list[float]:
+            status = get(self._component, vrs, n, buf)
             if status > FMI2_WARNING:
                 raise FMICallException(function="fmi2GetReal", status=status)
-            return out
+            return values.tolist()  # type: ignore[return-value]  # "d": floats (typeshed: int)
         return read
 
     def writer(self, names: list[str]):
@@ -159,36 +162,47 @@ class FmuInstance:
         n = len(names)
         vrs = (fmi2ValueReference * n)(*[self.variable(v).valueReference for v in names])
         buf = (fmi2Real * n)()
-        view = np.ctypeslib.as_array(buf)
         setter = self.slave._functions["fmi2SetReal"]
 
         def write(values) -> None:
             if n:
-                view[:] = values
+                buf[:] = values
                 status = setter(self._component, vrs, n, buf)
                 if status > FMI2_WARNING:
                     raise FMICallException(function="fmi2SetReal", status=status)
         return write
 
     def do_step(self, t: float, h: float) -> None:
-        start = time.perf_counter()
-        status = self.slave._functions["fmi2DoStep"](self._component, t, h, 1)
-        self.stats.do_step_seconds += time.perf_counter() - start
+        clock = time.perf_counter
+        start = clock()
+        status = self._fmi2_do_step(self._component, t, h, 1)
+        stats = self.stats
+        stats.do_step_seconds += clock() - start
         if status > FMI2_WARNING:
             raise FMICallException(function="fmi2DoStep", status=status)
-        self.stats.do_step_calls += 1
+        stats.do_step_calls += 1
 
-    # -- state rollback --------------------------------------------------------------------
+    # -- state rollback (raw ctypes, as fmpy's getFMUstate, with its status check) ---------
+    # the functions get, set, free (Fmu3Instance: FMI 3.0's, same arguments)
+    state_functions = ("fmi2GetFMUstate", "fmi2SetFMUstate", "fmi2FreeFMUstate")
+
     def get_state(self):
         self.stats.state_saves += 1
-        return self.slave.getFMUState()
+        state = fmi2FMUstate()  # a void pointer, as fmi3FMUState
+        self._state_call(self.state_functions[0], ctypes.byref(state))
+        return state
 
     def set_state(self, state) -> None:
         self.stats.rollbacks += 1
-        self.slave.setFMUState(state)
+        self._state_call(self.state_functions[1], state)
 
     def free_state(self, state) -> None:
-        self.slave.freeFMUState(state)
+        self._state_call(self.state_functions[2], ctypes.byref(state))
+
+    def _state_call(self, function: str, state) -> None:
+        status = self.slave._functions[function](self._component, state)
+        if status > FMI2_WARNING:
+            raise FMICallException(function=function, status=status)
 
 
 class LogCollector:

@@ -13,7 +13,6 @@ import ctypes
 import time
 from pathlib import Path
 
-import numpy as np
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi3 import FMU3Model, FMU3Slave, fmi3Boolean, fmi3Float64, fmi3ValueReference
 
@@ -61,6 +60,7 @@ class Fmu3Instance(FmuInstance):
     fmpy's FMU3Slave or FMU3Model."""
 
     fmi_version = 3
+    state_functions = ("fmi3GetFMUState", "fmi3SetFMUState", "fmi3FreeFMUState")
 
     def __init__(self, name: str, path: Path, log=None, interface: str = CO_SIMULATION):
         self.name, self.path, self.interface = name, Path(path), interface
@@ -76,7 +76,7 @@ class Fmu3Instance(FmuInstance):
         self.fmu = cls(guid=md.guid, unzipDirectory=self.unzip_dir,
                        modelIdentifier=kind.modelIdentifier, instanceName=name)
         self.slave = _Fmi3Calls(self)
-        self.experiment = (0.0, None, None)
+        self.experiment: tuple[float, float | None, float | None] = (0.0, None, None)
         self.stats = StepStatistics()
         self._log = log
         self._functions = self.fmu._functions
@@ -102,19 +102,21 @@ class Fmu3Instance(FmuInstance):
                                                    for v in names])
 
     def reader(self, names: list[str]):
-        """A function returning the current values of `names` as a numpy array (a view of one
-        reused buffer: copy it to keep it)."""
+        """A function returning the current values of `names` as a new list of Python floats
+        (as FmuInstance.reader: a master keeps what it reads)."""
         n = len(names)
+        if not n:
+            return list  # nothing to read: a new empty list per call
         vrs = self.value_references(names)
         buf = (fmi3Float64 * n)()
-        out = np.ctypeslib.as_array(buf) if n else np.zeros(0)
+        values = memoryview(buf).cast("B").cast("d")
         get = self._functions["fmi3GetFloat64"]
 
-        def read() -> np.ndarray:
-            status = get(self._component, vrs, n, buf, n) if n else 0
+        def read() -> list[float]:
+            status = get(self._component, vrs, n, buf, n)
             if status > FMI3_WARNING:
                 raise FMICallException(function="fmi3GetFloat64", status=status)
-            return out
+            return values.tolist()  # type: ignore[return-value]  # "d": floats (typeshed: int)
         return read
 
     def writer(self, names: list[str]):
@@ -122,12 +124,11 @@ class Fmu3Instance(FmuInstance):
         n = len(names)
         vrs = self.value_references(names)
         buf = (fmi3Float64 * n)()
-        view = np.ctypeslib.as_array(buf) if n else None
         setter = self._functions["fmi3SetFloat64"]
 
         def write(values) -> None:
             if n:
-                view[:] = values
+                buf[:] = values
                 status = setter(self._component, vrs, n, buf, n)
                 if status > FMI3_WARNING:
                     raise FMICallException(function="fmi3SetFloat64", status=status)

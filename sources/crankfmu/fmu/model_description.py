@@ -9,7 +9,8 @@ from __future__ import annotations
 
 from xml.etree.ElementTree import Element, SubElement, indent, tostring
 
-from ..runtime.slave_core import DEFAULT_TOLERANCE, derivative_unit, variable_table
+from ..runtime.slave_core import (DEFAULT_TOLERANCE, base_table_size, derivative_unit,
+                                  variable_table)
 from .bundle import guid as build_guid
 from .units import base_unit_attributes
 
@@ -125,9 +126,16 @@ def state_units(physics, states) -> list[str | None]:
     return [units.get(name) for name in states]
 
 
+def _fmi3_references(table, layout) -> list[int]:
+    """The FMI 3.0 value reference of each table variable: the base part as in FMI 2.0, the
+    companions after the Model Exchange variables (runtime/slave3.me_layout)."""
+    n_base = layout["time"][0]
+    return list(range(n_base)) + list(layout["companions"])
+
+
 def _variables3(root: Element, table, effects_on, states, units, slots: int, layout) -> None:
     node = SubElement(root, "ModelVariables")
-    for vr, var in enumerate(table):
+    for vr, var in zip(_fmi3_references(table, layout), table):
         attrs = _attributes(vr, var)
         if var.kind == "Boolean":
             start = var.start if not var.name.startswith("effect_") else \
@@ -163,7 +171,7 @@ def _variables3(root: Element, table, effects_on, states, units, slots: int, lay
 
 
 def _model_structure3(root: Element, table, layout) -> None:
-    vrs = {v.name: vr for vr, v in enumerate(table)}
+    vrs = {v.name: vr for vr, v in zip(_fmi3_references(table, layout), table)}
     states = " ".join(map(str, layout["states"]))
     structure = SubElement(root, "ModelStructure")
     outputs = [v for v in table if v.causality == "output"]
@@ -191,7 +199,8 @@ def model_description_fmi3(slave_class, build_id: str, host: tuple[str, str]) ->
     physics = slave_class.physics_class
     table = variable_table(physics)
     states, slots = tuple(slave_class.me_states), physics.event_slots
-    layout = me_layout(len(table), len(states), slots)
+    n_base = base_table_size(physics)
+    layout = me_layout(n_base, len(states), slots, len(table) - n_base)
     root = Element("fmiModelDescription", {
         "fmiVersion": "3.0", "modelName": physics.model_name,
         "instantiationToken": build_guid(physics.model_name, build_id),

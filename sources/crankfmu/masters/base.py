@@ -2,14 +2,17 @@
 
 A master advances a wired `System` (FMUs, links, external inputs) over communication steps.
 A new master is one file with a `Master` subclass and one line in MASTERS
-(crankfmu/masters/__init__.py); README "Adding a master" walks through an example
-(tests/examples/masters/halving.py). Implementers provide:
+(crankfmu/masters/__init__.py); docs/masters.md, "Adding a master", walks through an example
+(tests/examples/masters/iterated_gauss_seidel.py). Implementers provide:
 
     name              the algorithm's name in scenes and on the command line (a key of MASTERS).
     options           the [master] keys it takes, a tuple of `Option` (name, type, unit, default,
                       allowed range, help; crankfmu.masters.options). The scene, the
                       command line, the Python API, SSP files and the sidecar read them from
                       here; the master reads the checked values with `self.option(name)`.
+    defaults          (optional) {key: value}: this master's own default for an option it
+                      shares with other masters, where the shared default does not fit it (the
+                      adaptive master's tolerance); the key keeps its meaning, type and range.
     _step(t, h)       advance every FMU from t; on return every FMU is at t + taken and
                       `system.outputs` holds the connected outputs at t + taken, and
                       `self.seen[comp]` = (rows, taken): the inputs each FMU saw over the step
@@ -38,24 +41,33 @@ The base class composes parts that are each testable alone:
                                     midpoint value for a foreign FMU (with one warning)
     rollback.Rollback               get/set/free FMU states
     power.PortPower                 the port energies (the run's coupling-error figure)
+    taylor.TaylorCoupling           with [master].taylor = q: the output derivatives exchanged
+                                    at a communication point, the rows that replace
+                                    extrapolation
     scale.ErrorScale, check_finite  what tolerances are relative to; divergence
 and provides `initialize(t0)`, the public `step(t, h)` (calls `_step`, then keeps the
 communication-point history and the port energies), the two sweeps (`parallel_sweep`: Jacobi,
-`sequential_sweep`: Gauss-Seidel), and statistics per FMU.
+`sequential_sweep`: Gauss-Seidel), and statistics per FMU. The sweeps run each FMU's gather and
+advance functions made once at construction (the ones `gather` and `advance_component` call),
+not those methods: a master that needs other inputs overrides the sweep or writes its own.
 
-Inputs over a step are polynomials of degree <= 2, given as Taylor rows at the step start
-(value, first and second derivative).
+Inputs over a step are polynomials of degree <= 2 (extrapolation), or up to 5 (a Taylor
+coupling, masters/taylor.py), given as Taylor rows at the step start (value, first, second ...
+derivative): a list of rows, each a sequence of Python floats with one entry per signal.
+`system.outputs[comp]` is a list of floats, replaced (never changed in place) at every read, so
+the history keeps it as it is. A component has a few connected values: on those, Python floats
+cost less than numpy's per-call overhead, with the same operations and so the same floats
+(scripts/masters_identity.py).
 """
 from __future__ import annotations
 
-import numpy as np
-
 from .history import HISTORY_DEPTH, Coefficients, History, evaluate, taylor_rows
 from .inputs import InputFeed
-from .options import Option, OptionError
+from .options import Option, OptionError, check_coupling
 from .power import PortPower
 from .rollback import Rollback
 from .scale import RUNAWAY_LIMIT, DivergenceError, ErrorScale, check_finite
+from .taylor import TaylorCoupling
 
 __all__ = ["Coefficients", "DivergenceError", "HISTORY_DEPTH", "History", "Master",
            "RUNAWAY_LIMIT", "evaluate", "taylor_rows"]
@@ -64,6 +76,7 @@ __all__ = ["Coefficients", "DivergenceError", "HISTORY_DEPTH", "History", "Maste
 class Master:
     name = "base"
     options: tuple[Option, ...] = ()
+    defaults: dict = {}        # own defaults of shared options (see the module's docstring)
     needs_rollback = False
     variable_step = False
     startup_corrector = False  # fixed-step masters: see _corrected_first_step
@@ -77,6 +90,8 @@ class Master:
         self.settings = settings
         self.values = self.read_options(settings)
         self.extrapolation = self.values.get("extrapolation", 0)
+        taylor = self.values.get("taylor", 0)  # masters/taylor.py: its rows replace extrapolation
+        self.taylor = TaylorCoupling(system, taylor, self.name) if taylor else None
         self.rollback = Rollback(system, self.name, self.needs_rollback)
         self.can_rollback = self.rollback.available
         self.history = History()
@@ -86,21 +101,32 @@ class Master:
         self.seen: dict[str, tuple] = {}
         self.extra_statistics: dict = {}
         self.time = None
+        self._advancers = {c: self._advancer(c) for c in system.fmus}
+        # the sweeps' per-FMU work in the stepping order: (name, gather, advance_component,
+        # the reader of System.refresh_outputs), looked up once
+        self._sweep_plan = [(c, self.inputs.takers[c], self._advancers[c], system.read_outputs[c])
+                            for c in system.order]
 
     # -- options --------------------------------------------------------------------------
     @classmethod
     def read_options(cls, settings) -> dict:
-        """{key: checked value} of this master's options (the declared default where the
-        settings give none); OptionError names the key."""
+        """{key: checked value} of this master's options (its default where the settings give
+        none); OptionError names the key."""
         values = {}
         for option in cls.options:
             try:
                 values[option.name] = option.check(getattr(settings, option.name,
-                                                           option.default))
+                                                           cls.default(option)))
             except OptionError as err:
                 raise OptionError(f"[master].{option.name}: {err}") from None
+        check_coupling(values)
         cls.check_options(values)
         return values
+
+    @classmethod
+    def default(cls, option: Option):
+        """This master's default for `option`: its own (`defaults`), else the declared one."""
+        return cls.defaults.get(option.name, option.default)
 
     @classmethod
     def check_options(cls, values: dict) -> None:
@@ -131,14 +157,16 @@ class Master:
     # -- contract -------------------------------------------------------------------------
     def step(self, t: float, h: float) -> float:
         """Advance from t by h (or less, for a variable-step master); return the step taken."""
-        before = self.history.values[-1]
         self.time = t  # where a failing FMU call happened
-        if self.startup_corrector and len(self.history.times) == 1 and self.extrapolation == 2 \
+        history = self.history
+        if len(history.times) == 1 and self.startup_corrector and self.extrapolation == 2 \
                 and self.can_rollback:
             taken = self._corrected_first_step(t, h)
         else:
             taken = self._step(t, h)
-        self.power.add(taken, before, self.system.outputs, self.seen)
+        power = self.power
+        if power.ports:  # history.values[-1]: the outputs at t (pushed below)
+            power.add(taken, history.values[-1], self.system.outputs, self.seen)
         self._remember(t + taken)
         return taken
 
@@ -152,7 +180,7 @@ class Master:
         linearly towards the outputs the first pass gave at t + h (error O(h^2), local O(h^3))."""
         states = self.save_states()
         taken = self._step(t, h)
-        newest = {c: (t + taken, v.copy()) for c, v in self.system.outputs.items()}
+        newest = {c: (t + taken, v) for c, v in self.system.outputs.items()}
         self.restore_states(states)
         self.free_states(states)
         coefficients = self.source_coefficients(t, 1, newest)
@@ -168,46 +196,67 @@ class Master:
                             ) -> Coefficients:
         """Taylor rows at t of every component's connected outputs (extrapolation of `order`
         from the history; a component in `newest` (comp -> (t_new, values)) contributes that
-        point too), computed when first read."""
+        point too), computed when first read. With a Taylor coupling: the Taylor rows
+        exchanged at t (masters/taylor.py), whatever the order."""
+        if self.taylor is not None and newest is None:
+            return self.taylor.coefficients(t)
         return Coefficients(self.history, t, order, newest)
 
-    def gather(self, comp: str, coefficients: dict) -> np.ndarray:
+    def gather(self, comp: str, coefficients: dict) -> list:
         """Taylor rows of comp's inputs, from the rows of their sources."""
-        return self.inputs.gather(comp, coefficients)
+        return self.inputs.takers[comp](coefficients)
 
-    def advance_component(self, comp: str, t: float, h: float, rows: np.ndarray) -> None:
+    def advance_component(self, comp: str, t: float, h: float, rows: list) -> None:
         """Give comp its inputs as the polynomial `rows` over [t, t + h] and step it."""
-        system = self.system
-        if system.external_varies[comp]:  # constant external inputs were written at start
-            system.set_external(comp, t)
-        seen = self.inputs.write(comp, rows)
-        if seen is None:  # a foreign FMU: the midpoint value, held
-            seen = self.inputs.write_held(comp, rows, h)
-        self.seen[comp] = (seen, h)
-        system.fmus[comp].do_step(t, h)
+        self._advancers[comp](t, h, rows)
+
+    def _advancer(self, comp: str):
+        """advance_component of comp as a function of (t, h, rows), with what it needs looked
+        up once (the sweeps call it for every FMU in every step)."""
+        system, inputs, seen = self.system, self.inputs, self.seen
+        fmu, write_rows = system.fmus[comp], inputs.writers[comp]
+        varies = system.external_varies[comp]
+
+        def advance(t: float, h: float, rows: list) -> None:
+            if varies:  # constant external inputs were written at start
+                system.set_external(comp, t)
+            if write_rows is not None:
+                seen[comp] = (write_rows(rows), h)
+            else:  # a foreign FMU: the midpoint value, held (InputFeed.write warns once)
+                inputs.write(comp, rows)
+                seen[comp] = (inputs.write_held(comp, rows, h), h)
+            fmu.do_step(t, h)
+        return advance
 
     # -- the two sweeps -------------------------------------------------------------------
     def parallel_sweep(self, t: float, h: float, order: int) -> None:
-        """Jacobi: every component steps from t with inputs extrapolated from the history."""
-        system = self.system
-        coefficients = self.source_coefficients(t, order)
-        for comp in system.order:
-            self.advance_component(comp, t, h, self.gather(comp, coefficients))
-        for comp in system.order:
-            system.refresh_outputs(comp)
+        """Jacobi: every component steps from t with inputs extrapolated from the history (or
+        the Taylor coupling's rows)."""
+        if self.taylor is not None:
+            return self.taylor.sweep(self, t, h, sequential=False)
+        coefficients = Coefficients(self.history, t, order)
+        plan = self._sweep_plan
+        for _, gather, advance, _ in plan:
+            advance(t, h, gather(coefficients))
+        outputs = self.system.outputs
+        for comp, _, _, read in plan:
+            outputs[comp] = read()  # System.refresh_outputs
 
     def sequential_sweep(self, t: float, h: float, order: int, start_rows: dict | None = None
                          ) -> None:
         """Gauss-Seidel: components step in order; a source that already reached t + h
         contributes that newest point (interpolation), the others are extrapolated.
         `start_rows`: the extrapolation rows already computed (comp -> rows), reused."""
-        system = self.system
-        coefficients = self.source_coefficients(t, order)
+        if self.taylor is not None:  # its rows at t are kept: start_rows are those
+            return self.taylor.sweep(self, t, h, sequential=True)
+        coefficients = Coefficients(self.history, t, order)
         if start_rows:
             coefficients.update(start_rows)
-        for comp in system.order:
-            self.advance_component(comp, t, h, self.gather(comp, coefficients))
-            coefficients.reached(comp, t + h, system.refresh_outputs(comp))
+        end, outputs, reached = t + h, self.system.outputs, coefficients.reached
+        for comp, gather, advance, read in self._sweep_plan:
+            advance(t, h, gather(coefficients))
+            values = outputs[comp] = read()  # System.refresh_outputs
+            reached(comp, end, values)
 
     # -- rollback -------------------------------------------------------------------------
     def save_states(self) -> dict:
@@ -225,12 +274,14 @@ class Master:
         if self.uses_error_scale:
             self.scales.update(self.system.outputs)
 
-    def error_scale(self, comp: str, values: np.ndarray) -> np.ndarray:
+    def error_scale(self, comp: str, values):
         """What a tolerance is relative to: the largest magnitude the output has had so far,
         and at least its nominal (the FMU's `nominal` attribute, else 1 in its SI unit)."""
         return self.scales.of(comp, values)
 
     def check_finite(self, t: float) -> None:
+        """DivergenceError naming the first connected output that is not finite or beyond
+        RUNAWAY_LIMIT (masters.scale.check_finite)."""
         check_finite(t, self.system.outputs, self.system.out_names)
 
     def statistics(self) -> dict:
@@ -238,7 +289,9 @@ class Master:
         return {name: fmu.stats.as_dict() for name, fmu in self.system.fmus.items()}
 
     def master_statistics(self) -> dict:
-        return {"algorithm": self.name, "extrapolation": self.extrapolation,
+        taylor = {} if self.taylor is None else {"taylor": self.taylor.order,
+                                                 "exchange_rounds": self.taylor.rounds}
+        return {"algorithm": self.name, "extrapolation": self.extrapolation, **taylor,
                 **self.extra_statistics}
 
     def coupling_error(self) -> dict:

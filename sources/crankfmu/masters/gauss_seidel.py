@@ -9,11 +9,11 @@ before it (interpolation: 0 holds the newest value). Global error order: p + 1.
 from __future__ import annotations
 
 from .base import Master
-from .options import EXTRAPOLATION
+from .options import EXTRAPOLATION, TAYLOR
 
 
 class GaussSeidel(Master):
-    options = (EXTRAPOLATION,)
+    options = (EXTRAPOLATION, TAYLOR)
     startup_corrector = True
     name = "gauss-seidel"
 

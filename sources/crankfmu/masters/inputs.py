@@ -1,6 +1,6 @@
 """Inputs over a step: how each FMU receives the polynomial its sources' outputs follow.
 
-A part the master base composes; testable alone (tests/test_master_parts.py). Inputs are given
+A part the master base composes; testable alone (tests/test_master_contract.py). Inputs are given
 as Taylor rows at the step's start (value, 1st, 2nd derivative). A crankfmu FMU takes them
 through its companion inputs `X_d1`, `X_d2` (docs/architecture.md); an FMU without them (a
 foreign FMU) gets the polynomial's value at the step's midpoint, held (one warning per FMU: the
@@ -11,56 +11,40 @@ from __future__ import annotations
 import bisect
 import math
 import warnings
-
-import numpy as np
+from operator import itemgetter
 
 from .history import evaluate
 
 
 class InputFeed:
-    """Per FMU: which source outputs feed which inputs, and how the rows are written."""
+    """Per FMU: which source outputs feed which inputs, and how the rows are written (a
+    function of each, made once per FMU: they run for every FMU in every step)."""
 
     def __init__(self, system):
         self.system = system
-        self.groups = {c: _input_groups(system, c) for c in system.fmus}
-        self.derivative_writer = {c: _derivative_writer(system, c) for c in system.fmus}
-        self.derivatives_set = dict.fromkeys(system.fmus, False)
+        self.takers = {c: _taker(system, c) for c in system.fmus}
+        self.writers = {c: _rows_writer(system, c) for c in system.fmus}
         self.warned_foreign: set[str] = set()
 
-    def gather(self, comp: str, coefficients: dict) -> np.ndarray:
+    def gather(self, comp: str, coefficients: dict) -> list:
         """Taylor rows of comp's inputs, from the rows of their sources."""
-        groups = self.groups[comp]
-        if len(groups) == 1:  # one source feeds every input: a column selection
-            src, _, indices = groups[0]
-            if indices is None:  # all its outputs in order: the rows themselves (never written)
-                return coefficients[src]
-            return coefficients[src].take(indices, axis=1)
-        depth = max((len(coefficients[src]) for src, _, _ in groups), default=1)
-        rows = np.zeros((depth, len(self.system.in_names[comp])))
-        for src, positions, indices in groups:
-            c = coefficients[src]
-            rows[:len(c), positions] = c.take(indices, axis=1)
-        return rows
+        return self.takers[comp](coefficients)
 
-    def write(self, comp: str, rows: np.ndarray) -> np.ndarray:
-        """Write comp's inputs from `rows`; return the rows the FMU sees over the step (one
-        held row for an FMU without companion inputs)."""
-        write_derivatives = self.derivative_writer[comp]
-        if write_derivatives is not None:
-            self.system.write_inputs[comp](rows[0])
-            if len(rows) > 1 or self.derivatives_set[comp]:  # zeros once after a held step
-                write_derivatives(rows)
-                self.derivatives_set[comp] = len(rows) > 1
-            return rows
+    def write(self, comp: str, rows) -> list | None:
+        """Write comp's inputs from `rows`; return the rows the FMU sees over the step (None
+        for an FMU without companion inputs: see write_held)."""
+        write_rows = self.writers[comp]
+        if write_rows is not None:
+            return write_rows(rows)
         if len(rows) > 1:
             self._warn_foreign(comp)
         return None
 
-    def write_held(self, comp: str, rows: np.ndarray, h: float) -> np.ndarray:
+    def write_held(self, comp: str, rows, h: float) -> list:
         """A foreign FMU: the polynomial's value at the step's midpoint, held."""
         value = evaluate(rows, 0.5 * h)
         self.system.write_inputs[comp](value)
-        return value[None, :]
+        return [value]
 
     def _warn_foreign(self, comp: str) -> None:
         if comp not in self.warned_foreign:
@@ -71,36 +55,60 @@ class InputFeed:
                           f"2 at its inputs", RuntimeWarning, stacklevel=5)
 
 
-def _input_groups(system, comp: str) -> list[tuple[str, np.ndarray, np.ndarray]]:
-    """comp's inputs grouped by source: (source, input positions, source output indices)."""
-    groups: dict[str, tuple[list, list]] = {}
-    for pos, (src, k) in enumerate(system.in_sources[comp]):
-        groups.setdefault(src, ([], []))[0].append(pos)
-        groups[src][1].append(k)
-    out = [(src, np.array(p), np.array(i)) for src, (p, i) in groups.items()]
-    if len(out) == 1 and out[0][2].tolist() == list(range(len(system.out_names[out[0][0]]))):
-        out = [(out[0][0], out[0][1], None)]  # the source's outputs, all and in order
-    return out
+def _taker(system, comp: str):
+    """A function from the sources' Taylor rows (comp -> rows) to comp's input rows: the
+    source's rows themselves when one source feeds its outputs, all and in order; a selection
+    of their columns when one source feeds some; else input by input (a source with fewer
+    rows contributes 0 to the missing derivatives)."""
+    feeds = system.in_sources[comp]
+    sources = {src for src, _ in feeds}
+    if len(sources) != 1:
+        def by_input(coefficients: dict) -> list:
+            rows = [coefficients[src] for src, _ in feeds]
+            return [[r[d][k] if d < len(r) else 0.0 for r, (_, k) in zip(rows, feeds)]
+                    for d in range(max(map(len, rows), default=1))]
+        return by_input
+    src, = sources
+    indices = [k for _, k in feeds]
+    if indices == list(range(len(system.out_names[src]))):
+        return lambda coefficients: coefficients[src]
+    if len(indices) == 1:
+        k, = indices
+        return lambda coefficients: [[row[k]] for row in coefficients[src]]
+    pick = itemgetter(*indices)
+    return lambda coefficients: [list(pick(row)) for row in coefficients[src]]
 
 
-def _derivative_writer(system, comp: str):
-    """For comp's companion inputs X_d1..., X_d2... (crankfmu FMUs): a function writing them
-    from Taylor rows (derivatives the rows lack are 0), else None."""
+def _rows_writer(system, comp: str):
+    """A function writing comp's inputs from Taylor rows and returning the rows: the value row,
+    and the companion inputs X_d1..., X_d2... of a crankfmu FMU (derivatives the rows lack are
+    0; zeros are written once after a step with derivatives). None for an FMU without the
+    companions (a foreign FMU)."""
     fmu, names = system.fmus[comp], system.in_names[comp]
+    if not names:
+        return lambda rows: rows  # nothing to write
     companions = [f"{n}_d1" for n in names] + [f"{n}_d2" for n in names]
-    if not names or not all(n in fmu.variables and fmu.variables[n].causality == "input"
-                            for n in companions):
+    if not all(n in fmu.variables and fmu.variables[n].causality == "input"
+               for n in companions):
         return None
-    write = fmu.writer(companions)
-    padded = np.zeros((2, len(names)))  # d1, d2 for rows without a 2nd derivative (d2 = 0)
-    flat = padded.ravel()               # a view: the companions' order is d1..., d2...
+    write_values = system.write_inputs[comp]
+    write_derivatives = fmu.writer(companions)  # the companions' order is d1..., d2...
+    zeros = [0.0] * len(names)
+    no_derivatives = zeros + zeros
+    derivatives_set = False  # the FMU's companion inputs hold nonzero derivatives
 
-    def write_rows(rows: np.ndarray) -> None:
-        if len(rows) == 3:
-            write(rows[1:].ravel())
-        else:
-            padded[0] = rows[1] if len(rows) == 2 else 0.0
-            write(flat)
+    def write_rows(rows) -> list:
+        nonlocal derivatives_set
+        write_values(rows[0])
+        depth = len(rows)
+        if depth == 1:
+            if derivatives_set:
+                write_derivatives(no_derivatives)
+                derivatives_set = False
+            return rows
+        write_derivatives([*rows[1], *rows[2]] if depth == 3 else [*rows[1], *zeros])
+        derivatives_set = True
+        return rows
     return write_rows
 
 
@@ -146,6 +154,8 @@ def split_at_edges(t: float, h: float, edges: list[float]) -> list[float]:
     the step's ends are on them (edge_reading_time). A piece that ends at an edge reaches it in
     floats (t + piece >= edge), so the next piece reads the new value. [h] when no edge is
     inside, the same float h the grid gives."""
+    if not edges:
+        return [h]
     i = bisect.bisect_right(edges, edge_reading_time(t))
     end = t + h
     pieces, start = [], t

@@ -8,11 +8,11 @@ coupling delay on every connection. Global error order: extrapolation order + 1.
 from __future__ import annotations
 
 from .base import Master
-from .options import EXTRAPOLATION
+from .options import EXTRAPOLATION, TAYLOR
 
 
 class Jacobi(Master):
-    options = (EXTRAPOLATION,)
+    options = (EXTRAPOLATION, TAYLOR)
     startup_corrector = True
     name = "jacobi"
 

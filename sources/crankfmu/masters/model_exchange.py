@@ -4,7 +4,7 @@ Not a co-simulation: the state vector is every FMU's continuous states; at every
 evaluation each FMU gets the time and its states (fmi3SetTime, fmi3SetContinuousStates), the
 couplings are resolved through FMI (outputs read and written to the connected inputs in the
 order their direct feedthrough needs: `evaluation_plan`) and the derivatives read. So the coupling
-is exact, as in the monolithic reference (reference/composed.py), but through the FMUs: it is the
+is exact, as in the monolithic reference (monolithic/composed.py), but through the FMUs: it is the
 solution a co-simulation approaches as its step goes to zero, computed with the FMUs themselves.
 
 scipy's solve_ivp integrates over each communication step (the runner's grid; a step that
@@ -274,7 +274,7 @@ class ModelExchange(Master):
                 if t == t0 and zero[i]:
                     return math.nan
                 return self.indicators(t, y)[i]
-            event.terminal, event.direction = True, 0.0
+            event.terminal, event.direction = True, 0.0  # type: ignore[attr-defined]  # scipy's
             events.append(event)
         return events
 

@@ -96,3 +96,16 @@ EXTRAPOLATION = Option(
 TOLERANCE = Option(
     "tolerance", float, "1", 1e-6, "the master's own relative tolerance (interface "
     "convergence, step error)", positive=True, maximum=1.0)
+TAYLOR = Option(
+    "taylor", int, "1", 0, "Taylor coupling order q: the inputs over a step follow the Taylor "
+    "polynomial of degree q of their sources' outputs at its start, from the output "
+    "derivatives the FMUs compute (<output>_d1 .. _dq, exchanged at each communication point); "
+    "0: extrapolation from past points", minimum=0, maximum=4, choices=(0, 1, 2, 3, 4))
+
+
+def check_coupling(values: dict) -> None:
+    """Taylor coupling replaces extrapolation: not both."""
+    if values.get("taylor", 0) and values.get("extrapolation", 0):
+        raise OptionError(f"[master].extrapolation: must be 0 with taylor = {values['taylor']} "
+                          f"(the inputs follow the sources' Taylor polynomial), got "
+                          f"{values['extrapolation']}")

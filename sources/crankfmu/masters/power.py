@@ -66,10 +66,10 @@ class PortPower:
     def add(self, h: float, before: dict, after: dict, seen: dict) -> None:
         for p in self.ports:
             (tau0, tau1), (w0, w1) = _ends(seen, p.receiver, p.tau_in), _ends(seen, p.driver, p.w_in)
-            p.energy_receiver += 0.5 * h * (tau0 * before[p.receiver].item(p.w_out)
-                                            + tau1 * after[p.receiver].item(p.w_out))
-            P0 = before[p.driver].item(p.tau_out) * w0
-            P1 = after[p.driver].item(p.tau_out) * w1
+            p.energy_receiver += 0.5 * h * (tau0 * before[p.receiver][p.w_out]
+                                            + tau1 * after[p.receiver][p.w_out])
+            P0 = before[p.driver][p.tau_out] * w0
+            P1 = after[p.driver][p.tau_out] * w1
             p.energy_driver += 0.5 * h * (P0 + P1)
             p.throughput += 0.5 * h * (abs(P0) + abs(P1))
 
@@ -90,11 +90,15 @@ class PortPower:
 
 def _ends(seen: dict, comp: str, index: int) -> tuple[float, float]:
     """An input's value at the step's start and end, from the Taylor rows the FMU saw (only the
-    ports' inputs are evaluated: in the order of masters.base.evaluate, so the same floats)."""
+    ports' inputs are evaluated: in the order of masters.history.evaluate, so the same floats)."""
     rows, h = seen[comp]
-    start = end = rows.item(0, index)  # a Python float: cheaper than a numpy scalar
+    start = end = rows[0][index]
     if len(rows) > 1:
-        end += rows.item(1, index) * h
+        end += rows[1][index] * h
     if len(rows) > 2:
-        end += rows.item(2, index) * (0.5 * h * h)
+        end += rows[2][index] * (0.5 * h * h)
+    term = 0.5 * h * h
+    for k in range(3, len(rows)):  # a Taylor coupling's higher rows
+        term *= h / k
+        end += rows[k][index] * term
     return start, end

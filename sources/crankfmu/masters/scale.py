@@ -3,6 +3,8 @@ stops a run leaving the finite, bounded range. A part the master base composes; 
 alone."""
 from __future__ import annotations
 
+from itertools import chain
+
 import numpy as np
 
 RUNAWAY_LIMIT = 1e12  # |value| beyond this in a connected output is taken as divergence
@@ -29,14 +31,15 @@ class ErrorScale:
 
     def update(self, outputs: dict) -> None:
         """A NaN output makes the scale NaN, as numpy's maximum does."""
+        scale = self.scale
         for c, v in outputs.items():
-            self.scale[c] = [a if a >= abs(b) else abs(b)
-                             for a, b in zip(self.scale[c], v.tolist())]
+            scale[c] = [a if a >= abs(b) else abs(b) for a, b in zip(scale[c], v)]
 
     def of(self, comp: str, values: np.ndarray) -> np.ndarray:
+        """The scale as an array (the iterative master's interface vectors)."""
         return np.maximum(np.maximum(self.scale[comp], np.abs(values)), self.nominal[comp])
 
-    def of_floats(self, comp: str, values: list[float]) -> list[float]:
+    def of_floats(self, comp: str, values) -> list[float]:
         """`of` in Python floats (a NaN value gives NaN, as numpy's maximum does)."""
         out = []
         for s, y, n in zip(self.scale[comp], values, self.nominal[comp]):
@@ -48,12 +51,13 @@ class ErrorScale:
 
 def check_finite(t: float, outputs: dict, out_names: dict) -> None:
     """DivergenceError naming the first output that is not finite or beyond RUNAWAY_LIMIT."""
+    # one sum for the usual case: a NaN makes it NaN, an infinity inf (both fail the test)
+    if sum(map(abs, chain.from_iterable(outputs.values()))) < RUNAWAY_LIMIT:
+        return
     for comp, values in outputs.items():
-        # in Python floats (cheaper than numpy for a few values): a NaN makes the sum NaN
-        if not sum(map(abs, values.tolist())) < RUNAWAY_LIMIT and not all(
-                -RUNAWAY_LIMIT < x < RUNAWAY_LIMIT for x in values.tolist()):
-            k = int(np.argmax(~np.isfinite(values) | (np.abs(values) >= RUNAWAY_LIMIT)))
-            raise DivergenceError(t, comp, out_names[comp][k], float(values[k]))
+        for name, x in zip(out_names[comp], values):
+            if not -RUNAWAY_LIMIT < x < RUNAWAY_LIMIT:
+                raise DivergenceError(t, comp, name, float(x))
 
 
 def _nominal(fmu, name: str) -> float:

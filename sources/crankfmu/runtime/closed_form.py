@@ -44,15 +44,18 @@ def phi_functions(z: float, count: int) -> list[float]:
 
 
 _WEIGHTS: dict = {}  # (h, tau) -> [e^z, -z k! h^k phi_{k+1}(z) ...]: fixed steps repeat them
+MAX_FORCING_DEGREE = 6  # an input polynomial of degree 5 integrated once (a PI loop's integral)
 
 
 def lag_step(y0: float, forcing: Poly, h: float, tau: float) -> float:
-    """y(h) for tau y' + y = F(s), F(s) = sum_k forcing[k] s^k on [0, h] (degree <= 3)."""
+    """y(h) for tau y' + y = F(s), F(s) = sum_k forcing[k] s^k on [0, h] (degree <=
+    MAX_FORCING_DEGREE)."""
     weights = _WEIGHTS.get((h, tau))
     if weights is None:
         z = -h / tau
         weights = [math.exp(z)] + [-z * math.factorial(k) * h ** k * phi
-                                   for k, phi in enumerate(phi_functions(z, 4))]
+                                   for k, phi in enumerate(phi_functions(
+                                       z, MAX_FORCING_DEGREE + 1))]
         if len(_WEIGHTS) > 1024:  # variable steps: keep the cache small
             _WEIGHTS.clear()
         _WEIGHTS[(h, tau)] = weights
@@ -60,6 +63,18 @@ def lag_step(y0: float, forcing: Poly, h: float, tau: float) -> float:
     for a, weight in zip(forcing, weights[1:]):
         total += a * weight
     return total
+
+
+def taylor_polynomial(rows: Sequence[Sequence[float]], index: int,
+                      minus: int | None = None) -> list[float]:
+    """The coefficients in s (lowest power first) of input `index` (minus input `minus`) over a
+    step, from the inputs' Taylor rows at its start: rows[k][index] / k!."""
+    out, factorial = [], 1.0
+    for k, row in enumerate(rows):
+        factorial *= max(k, 1)
+        value = row[index] if minus is None else row[index] - row[minus]
+        out.append(value if k < 2 else 0.5 * value if k == 2 else value / factorial)
+    return out
 
 
 def poly_value(c: Poly, s: float) -> float:
@@ -113,9 +128,11 @@ def sign_changes(f, a: float, b: float, samples: Sequence[float] = ()) -> list[f
     return roots
 
 
-def poly_critical_points(c: Poly) -> list[float]:
-    """Real roots of c' for degree <= 3 (closed form): the points that split c into monotone
-    pieces."""
+def poly_critical_points(c: Poly, a: float = -math.inf, b: float = math.inf) -> list[float]:
+    """Real roots of c': the points that split c into monotone pieces. Degree <= 3: all of
+    them, in closed form; higher degree: those in (a, b) (a finite interval), each found by
+    Brent's method between the critical points of c' (recursively: c' is monotone between
+    them, so each piece holds at most one root)."""
     d = poly_derivative(c)
     while d and d[-1] == 0.0:
         d.pop()
@@ -123,6 +140,8 @@ def poly_critical_points(c: Poly) -> list[float]:
         return []
     if len(d) == 2:
         return [-d[0] / d[1]]
+    if len(d) > 3:
+        return sign_changes(lambda x: poly_value(d, x), a, b, poly_critical_points(d, a, b))
     a, b, cc = d[2], d[1], d[0]
     disc = b * b - 4 * a * cc
     if disc < 0.0:

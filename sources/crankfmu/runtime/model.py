@@ -3,7 +3,7 @@ the scipy path).
 
 A model is a set of ODEs with inputs, outputs, parameters and switchable effects. The same model
 object serves the FMU (through `crankfmu.runtime.slave.ModelSlave`) and the monolithic reference
-(`crankfmu.studies.reference`), so the equations exist once.
+(`crankfmu.monolithic`), so the equations exist once.
 
 Implementers subclass `PhysicsModel` and provide:
 
@@ -56,9 +56,18 @@ Optional (hybrid models)
     monitor_functions(u_of_t)      non-terminal events (e.g. force extrema) whose crossings
     observe(t, x, u)               are handed to observe(), as is the state at every step end.
 
+Optional (output derivatives: the companions a master's Taylor coupling reads)
+    derivative_outputs             names of outputs whose time derivatives 1 .. MAX_OUTPUT_
+                                   DERIVATIVE the FMU offers as outputs <name>_d1, _d2, ...
+    derivative_outputs_affine      True (per effect, a property) when those outputs are affine
+                                   in the state and the inputs and not in time: their rows are
+                                   then exact (runtime/taylor.py); else differenced.
+    state_rows(...)                the state's Taylor rows from derivatives() (runtime/
+                                   taylor.py); a model with exact rows (a linear one) overrides.
+
 Inputs reach `advance` as a callable u_of_t(t) -> input vector, so a master may hand over an
 input polynomial (extrapolation) instead of a held value; from the FMU it is an
-`InputPolynomial`, whose `taylor(t)` gives the coefficients a closed form needs.
+`InputPolynomial`, whose `taylor(t)` gives the Taylor rows a closed form needs.
 
 What the base class does with that: `step` (what the FMU calls) runs `advance` under one work
 limit; `advance` integrates between events with `integrate`, which uses the runtime's
@@ -76,8 +85,9 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from . import dopri
+from . import dopri, taylor
 from .dopri import Integration
+from .taylor import InputPolynomial
 
 InputFunction = Callable[[float], Sequence[float]]
 # An FMU parameter of every crankfmu FMU that is not physics: integrate with scipy's solve_ivp
@@ -88,6 +98,12 @@ SCIPY_SOLVER = "scipy_solver"
 # at a tenth of it, as accurate or better (hammer, 0.5 s at 1e-8: E_radiated 2.7e-7 vs 9.4e-8,
 # w_crank 1.5e-10 vs 7.0e-10; servo press: w_crank 4.0e-8 vs 3.0e-8) for 10-30 % more work.
 TOLERANCE_FACTOR = 0.1
+# The companions of crankfmu FMUs (runtime/slave_core.py): input polynomials over a step of
+# degree up to MAX_INPUT_DEGREE (inputs X_d1 .. X_d5), and the derivatives 1 .. MAX_OUTPUT_
+# DERIVATIVE of each derivative output (outputs Y_d1 .. Y_d4: a Taylor coupling of order 4; a
+# Gauss-Seidel step through the newest value raises the degree by one)
+MAX_INPUT_DEGREE = 5
+MAX_OUTPUT_DERIVATIVE = 4
 
 
 class CrankfmuError(Exception):
@@ -176,15 +192,23 @@ class PhysicsModel:
     # monitor_functions/observe): see the module docstring; the monolithic reference relies on it
     advance_follows_contract: bool = False
     event_slots: int = 0  # see the module docstring: Model Exchange's event indicators
+    # output derivatives (see the module docstring and runtime/taylor.py)
+    derivative_outputs: tuple[str, ...] = ()
+    derivative_outputs_affine: bool = False
 
     IN = variable_indices("PhysicsModel", "input", ())
     OUT = variable_indices("PhysicsModel", "output", ())
+    DERIVATIVE_OUT: tuple[int, ...] = ()  # positions of derivative_outputs among the outputs
 
     def __init_subclass__(cls, **kwargs):
         """Derive the name -> position tables IN and OUT from the class's declarations."""
         super().__init_subclass__(**kwargs)
         cls.IN = variable_indices(cls.__name__, "input", cls.inputs)
         cls.OUT = variable_indices(cls.__name__, "output", cls.outputs)
+        unknown = [n for n in cls.derivative_outputs if n not in cls.OUT._fields]
+        if unknown:
+            raise TypeError(f"{cls.__name__}: derivative_outputs {unknown} are not outputs")
+        cls.DERIVATIVE_OUT = tuple(cls.OUT._fields.index(n) for n in cls.derivative_outputs)
 
     def __init__(self, parameters: dict | None = None, effects: Sequence[str] | dict | None = None):
         values = {v.name: float(v.start) for v in self.parameters}
@@ -269,6 +293,28 @@ class PhysicsModel:
 
     def set_solver_state(self, state: dict) -> None:
         self._h_next = state.get("h_next")
+
+    # -- output derivatives (runtime/taylor.py) ---------------------------------------------
+    def state_rows(self, t: float, x, u_rows: list, order: int, delta: float,
+                   known: list = ()) -> list:
+        """[x, x', ..., x^(order)] at t, the inputs following the Taylor rows u_rows:
+        differences of derivatives() along the polynomials. `known`: leading rows already
+        computed for this x with the same leading input rows (row k + 1 needs input rows
+        0 .. k), reused."""
+        return taylor.state_rows(self.derivatives, t, x, u_rows, order, delta, known)
+
+    def derivative_output_rows(self, t: float, x_rows: list, u_rows: list, order: int,
+                               delta: float) -> list:
+        """[y', ..., y^(order)] at t of the outputs in derivative_outputs (in that order), from
+        the state rows (at least order + 1) and the input rows."""
+        if not self.derivative_outputs_affine:
+            return taylor.output_rows(self.output_values, t, x_rows, u_rows, order, delta,
+                                      self.DERIVATIVE_OUT)
+        affine = self.__dict__.get("_affine_outputs")
+        if affine is None:  # read off once: C and D are fixed by parameters and effects
+            affine = self._affine_outputs = taylor.AffineOutputs(
+                self.output_values, t, len(x_rows[0]), len(u_rows[0]), self.DERIVATIVE_OUT)
+        return affine.rows(x_rows, u_rows, order)
 
     # -- conveniences built on the contract ----------------------------------------------
     def default_inputs(self) -> np.ndarray:
@@ -404,30 +450,6 @@ class PhysicsModel:
         return lambda s, y: self.jacobian(s, y, u_of_t(s))
 
 
-class InputPolynomial:
-    """u(t) = u + d1 (t - t0) + d2 (t - t0)^2 / 2 on plain floats: the input as the master
-    extrapolates it over a step. Closed-form models read its coefficients (`taylor`).
-    u, d1, d2: lists of floats (taken as they are: the adapter calls this in every doStep)."""
-
-    __slots__ = ("t0", "u", "d1", "d2", "_half_d2", "moving")
-
-    def __init__(self, t0: float, u: list, d1: list | None = None, d2: list | None = None):
-        self.t0, self.u = t0, u
-        self.d1 = d1 if d1 is not None else [0.0] * len(u)
-        self.d2 = d2 if d2 is not None else [0.0] * len(u)
-        self.moving = any(self.d1) or any(self.d2)
-        self._half_d2 = [0.5 * v for v in self.d2] if self.moving else self.d2
-
-    def __call__(self, t: float) -> list:
-        if not self.moving:
-            return self.u
-        s = t - self.t0
-        return [a + s * (b + s * c) for a, b, c in zip(self.u, self.d1, self._half_d2)]
-
-    def taylor(self, t: float) -> tuple[list, list, list]:
-        """(u, u', u'') at t."""
-        s = t - self.t0
-        return self(t), [b + s * c for b, c in zip(self.d1, self.d2)], self.d2
 
 
 def held(u) -> InputFunction:
@@ -435,10 +457,10 @@ def held(u) -> InputFunction:
     return InputPolynomial(0.0, [float(v) for v in u])
 
 
-def quadratic_coefficients(u_of_t: InputFunction, t0: float, h: float):
-    """(u, u', u'') at t0 if u_of_t is a polynomial of degree <= 2 on [t0, t0 + h], else None.
-    Exact for an `InputPolynomial`; any other function is fitted at three points and checked at
-    a fourth, to round-off."""
+def input_rows(u_of_t: InputFunction, t0: float, h: float) -> list[list] | None:
+    """The Taylor rows [u, u', u'', ...] at t0 (at least three) if u_of_t is a polynomial on
+    [t0, t0 + h], else None. Exact for an `InputPolynomial`; any other function is fitted as a
+    quadratic at three points and checked at a fourth, to round-off."""
     if isinstance(u_of_t, InputPolynomial):
         return u_of_t.taylor(t0)
     s = np.array([0.0, 0.5 * h, h])
@@ -451,4 +473,4 @@ def quadratic_coefficients(u_of_t: InputFunction, t0: float, h: float):
     scale = np.max(np.abs(values), axis=0) + 1e-300
     if np.any(np.abs(check - guess) > 1e-9 * scale):
         return None
-    return list(a0), list(a1), list(a2)
+    return [list(a0), list(a1), list(a2)]

@@ -38,7 +38,7 @@ from pythonfmu3.enums import Fmi3Status
 from pythonfmu3.modelexchange import ModelExchange
 
 from .model import IntegrationError
-from .slave_core import DEFAULT_TOLERANCE, SlaveCore
+from .slave_core import DEFAULT_TOLERANCE, SlaveCore, base_table_size
 
 # fmi3EnterInitializationMode's startTime and tolerance, set by crankfmu's launcher (launcher3.c)
 # right before it forwards that call; not variables of the modelDescription
@@ -46,15 +46,19 @@ EXPERIMENT_VRS = (1 << 30, (1 << 30) + 1)
 PADDING = 1.0  # the value of an event-indicator slot the current mode does not use
 
 
-def me_layout(n_table: int, n_states: int, n_slots: int) -> dict[str, range]:
-    """Value references of the FMI 3.0 variables after the shared table: time, the states, their
-    derivatives, the event indicators (the modelDescription writer uses the same function)."""
-    time = n_table
+def me_layout(n_base: int, n_states: int, n_slots: int, n_companions: int = 0
+              ) -> dict[str, range]:
+    """Value references of the FMI 3.0 variables after the shared table's base part: time, the
+    states, their derivatives, the event indicators; then the table's Taylor-coupling
+    companions (slave_core.variable_table), which came later (the modelDescription writer uses
+    the same function)."""
+    time = n_base
     states = range(time + 1, time + 1 + n_states)
     derivatives = range(states.stop, states.stop + n_states)
     indicators = range(derivatives.stop, derivatives.stop + n_slots)
     return {"time": range(time, time + 1), "states": states, "derivatives": derivatives,
-            "indicators": indicators}
+            "indicators": indicators,
+            "companions": range(indicators.stop, indicators.stop + n_companions)}
 
 
 class DiscreteUpdate:
@@ -86,10 +90,12 @@ class ModelSlave3(SlaveCore, Fmi3SlaveBase, CoSimulation, ModelExchange):
             self._values[offset + k] = effect.name in self.me_effects
         self.default_experiment = DefaultExperiment(0.0, self.default_stop, self.default_step,
                                                     DEFAULT_TOLERANCE)
-        n_table = len(self._table)
+        n_base = base_table_size(self.physics_class)
         self._slots_count = self.physics_class.event_slots
-        self._layout = me_layout(n_table, len(self.me_states), self._slots_count)
-        self._n_table = n_table
+        self._layout = me_layout(n_base, len(self.me_states), self._slots_count,
+                                 len(self._table) - n_base)
+        self._n_table = n_base  # below: the core's value references as they are
+        self._companion_shift = self._layout["companions"].start - n_base
         self._slots: list | None = None  # [(g, index in event_functions or None, direction)]
         self._ref: list[int] = []        # each slot's sign when its mode was entered
         self._layout_checked = False
@@ -106,12 +112,21 @@ class ModelSlave3(SlaveCore, Fmi3SlaveBase, CoSimulation, ModelExchange):
     def get_float64(self, vrs):
         if all(vr < self._n_table for vr in vrs):
             return self.get_real(vrs)
+        companions = self._layout["companions"]
+        if all(vr < self._n_table or vr in companions for vr in vrs):
+            return self.get_real(self._core_vrs(vrs))
         return [self._get_one(vr) for vr in vrs]
+
+    def _core_vrs(self, vrs) -> list[int]:
+        """The core's value references of table variables (a companion's moved by the FMI 3.0
+        variables before it)."""
+        n, shift = self._n_table, self._companion_shift
+        return [vr if vr < n else vr - shift for vr in vrs]
 
     def _get_one(self, vr: int) -> float:
         layout = self._layout
-        if vr < self._n_table:
-            return self.get_real([vr])[0]
+        if vr < self._n_table or vr in layout["companions"]:
+            return self.get_real(self._core_vrs([vr]))[0]
         if vr in layout["time"]:
             return self._time
         if vr in layout["states"]:
@@ -127,11 +142,12 @@ class ModelSlave3(SlaveCore, Fmi3SlaveBase, CoSimulation, ModelExchange):
             given = dict(zip(vrs, values))
             self._set_experiment(given.get(EXPERIMENT_VRS[0], 0.0), given.get(EXPERIMENT_VRS[1]))
             return
-        self.set_real(vrs, values)
+        self.set_real(self._core_vrs(vrs), values)
 
     def set_time(self, time: float):
         self._time = float(time)
         self._outputs_stale = True
+        self._state_changed()  # output derivatives and cached state rows are of another time
 
     # -- Model Exchange ----------------------------------------------------------------------
     def _check_layout(self) -> None:
@@ -168,6 +184,7 @@ class ModelSlave3(SlaveCore, Fmi3SlaveBase, CoSimulation, ModelExchange):
         self._check_layout()
         self._x = list(values)
         self._outputs_stale = True
+        self._state_changed()
 
     def get_nominals_of_continuous_states(self, size: int):
         self._check_layout()
@@ -239,6 +256,7 @@ class ModelSlave3(SlaveCore, Fmi3SlaveBase, CoSimulation, ModelExchange):
         changed = x != list(self._x)
         self._x = x
         self._outputs_stale = True
+        self._state_changed()
         self._arm()
         return DiscreteUpdate(changed)
 

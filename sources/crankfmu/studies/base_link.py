@@ -70,7 +70,8 @@ def _first_approximation(press, motor, u0: float, lag: bool, crank_mass):
 def mass_sweep(scene, masses=DEFAULT_MASSES, cases=CASES) -> dict:
     """{case: {"mass", "delta_sim", "delta_1", "L1", "J0"}} (arrays over `masses` [kg]; delta
     [1], L1 [N m], J0 [kg m^2]) plus "lag" and "m2_scene" [kg]. Progress on stderr."""
-    from .papers import press_steady_revolution, progress
+    from .papers import press_steady_revolution
+    from .progress import progress, progress_over
 
     from .flywheel import eq28_conventions
 
@@ -81,7 +82,7 @@ def mass_sweep(scene, masses=DEFAULT_MASSES, cases=CASES) -> dict:
     for case in cases:
         progress(f"analyze press: {case}, {masses.size} masses")
         rows = []
-        for m in masses:
+        for m in progress_over(masses, f"analyze press: {case}", "mass"):
             p, cm = _case_models(press, case, float(m))
             err = _first_approximation(p, motor, u0, lag, cm)
             rev = press_steady_revolution(p, motor, u0, crank_mass=cm)
@@ -122,8 +123,8 @@ def claim_verdict(sweep: dict, m_low: float | None = None, m_high: float | None 
                  f"{cw['mass'][0]:g} kg)")
     r2 = sweep["r"] ** 2
     lines.append(f"link 2 translates with the crank pin: a kilogram of it is a flywheel of "
-                 f"r^2 = {r2:.4g} kg m^2 at the crank; the (28) flywheel, {sweep['J_Mx']:.2f} "
-                 f"kg m^2 at the crank, would take {sweep['J_Mx'] / r2:.0f} kg of base link")
+                 f"r^2 = {r2:.4g} kg.m2 at the crank; the (28) flywheel, {sweep['J_Mx']:.2f} "
+                 f"kg.m2 at the crank, would take {sweep['J_Mx'] / r2:.0f} kg of base link")
     holds = change["gravity on"] < 0   # a press has weights: the claim is about this case
     lines.append("the claim that the base link is a built-in counterweight reducing the "
                  "non-uniformity: " + ("holds" if holds else "FAILS") +

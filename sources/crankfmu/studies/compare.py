@@ -35,6 +35,7 @@ import numpy as np
 
 from ..system.analysis import LISTS, NUMBERS, analysis_roles
 from ..system.scene import SceneError
+from .table import Table
 
 
 @dataclass
@@ -256,12 +257,49 @@ def check_compare_outputs(scene_a, scene_b, out_dir, option: str = "--out",
     return out_dir
 
 
+CSV_COLUMNS = ("metric", "unit", "A", "B", "B_minus_A", "relative")  # A, B: the runs' labels
+
+
+@dataclass
+class CompareResult(Table):
+    """The comparison: one row per figure (metric, unit, A, B, B - A, relative), `text` the
+    table as printed, `a` and `b` the runs' role series; as a table (`to_pandas()`, indexed by
+    the figure, `units`: figure -> its unit) the rows of compare.csv. Paths are None where
+    nothing was written (the API without `out`, `png` without `plot`)."""
+
+    table: list[tuple]
+    text: str
+    a: Series
+    b: Series
+    csv: Path | None
+    png: Path | None = None
+
+    @property
+    def columns(self) -> list[str]:
+        return [CSV_COLUMNS[0], CSV_COLUMNS[1], self.a.label, self.b.label, *CSV_COLUMNS[4:]]
+
+    @property
+    def rows(self) -> list[dict]:
+        return [dict(zip(self.columns, row)) for row in self.table]
+
+    @property
+    def units(self) -> dict:
+        return {row[0]: row[1] for row in self.table}
+
+    def to_pandas(self):
+        """A pandas DataFrame indexed by the figure (needs pandas); units in the "unit" column
+        and in `df.attrs["units"]`."""
+        from .table import data_frame
+        return data_frame(self.table, self.columns, self.units, index="metric")
+
+
 def compare_scenes(scene_a, scene_b, out_dir: Path, options, executor=None,
-                   option: str = "--out", stop_option: str = "--stop-time") -> dict:
-    """Run both scenes into out_dir; write compare.csv and compare.png; return the results.
-    With an `executor` (crankfmu.studies.executor) both runs go through it (in parallel on a
-    pool or cluster); without one they run in this process one after the other. Same numbers.
-    Everything is checked before the runs (check_compare_outputs)."""
+                   option: str = "--out", stop_option: str = "--stop-time",
+                   plot: bool = False) -> CompareResult:
+    """Run both scenes into out_dir; write compare.csv (and with `plot` compare.png); return
+    the results. With an `executor` (crankfmu.studies.executor) both runs go through it (in
+    parallel on a pool or cluster); without one they run in this process one after the other.
+    Same numbers. Everything is checked before the runs (check_compare_outputs)."""
     from ..cosim.results import save_figure
     from ..outputs import atomic_write
     out_dir = check_compare_outputs(scene_a, scene_b, out_dir, option, stop_option)
@@ -273,11 +311,12 @@ def compare_scenes(scene_a, scene_b, out_dir: Path, options, executor=None,
         a, b = _run_both(executor, [(scene_a, la), (scene_b, lb)], out_dir, options)
     rows = compare_table(a, b)
     atomic_write(out_dir / "compare.csv", lambda f: write_table(f, rows, la, lb))
-    save_figure(overlay_figure(a, b, f"{la} (A) vs {lb} (B)"), out_dir / "compare.png")
+    png = save_figure(overlay_figure(a, b, f"{la} (A) vs {lb} (B)"), out_dir / "compare.png") \
+        if plot else None
     text = format_table(rows, la, lb)
     notes = missing_notes({la: metrics(a), lb: metrics(b)})
-    return {"rows": rows, "text": text + ("\n" + notes if notes else ""), "a": a, "b": b,
-            "csv": out_dir / "compare.csv", "png": out_dir / "compare.png"}
+    return CompareResult(rows, text + ("\n" + notes if notes else ""), a, b,
+                         out_dir / "compare.csv", png)
 
 
 def missing_notes(by_label: dict) -> str:

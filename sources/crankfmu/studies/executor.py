@@ -2,11 +2,17 @@
 
 Python FMUs share one interpreter lock inside a process, so the unit of parallel work is a whole
 run (`RunTask`: a parsed scene with its parameters set, plus the FMU files it needs) in its own
-process. Two implementations of one interface:
+process. Three implementations of one interface (make_executor chooses by --jobs N and
+--scheduler, docs/cli.md):
 
+    InProcessExecutor()         jobs = 1: every run in this process, one after another, as
+                                `crankfmu run` runs: no worker to start, and a script calling
+                                the API needs no main guard.
     LocalPoolExecutor(jobs)     concurrent.futures.ProcessPoolExecutor, spawn context (a fresh
-                                interpreter per worker, nothing inherited from the parent); jobs
-                                = 1 is a pool of one worker (runs one after another).
+                                interpreter per worker, nothing inherited from the parent): a
+                                script calling the API needs `if __name__ == "__main__":`
+                                (cosim.companions.MAIN_GUARD; a missing one is a
+                                WorkerStartError, not a study of lost runs).
     DaskExecutor(address)       a Dask distributed cluster (distributed.Client). No shared disk is
                                 assumed: each FMU file is sent once with Client.upload_file
                                 (kept by the scheduler for workers that restart or join later;
@@ -106,14 +112,15 @@ def prepare_tasks(tasks: list[RunTask], fmu_dir: Path | None) -> dict[str, Path]
     """Resolve (and build, once, in the parent) every FMU the tasks need; fill task.fmus.
     Returns digest -> path of the parent's file."""
     from ..fmu.instance3 import MODEL_EXCHANGE
-    from ..system.wiring import default_fmu_dir, master_interface, resolve_fmu
+    from ..masters import traits
+    from ..system.wiring import default_fmu_dir, resolve_fmu
 
     files: dict[str, Path] = {}
     resolved: dict[tuple, Path] = {}
     for task in tasks:
         scene = task.scene
         folder = Path(fmu_dir) if fmu_dir else default_fmu_dir(scene)
-        me = master_interface(scene.master.algorithm) == MODEL_EXCHANGE
+        me = traits(scene.master.algorithm).interface == MODEL_EXCHANGE
         for name, comp in scene.components.items():
             ref = (str(scene.path.parent), comp.fmu, str(folder), comp.fmi, me,
                    tuple(sorted(comp.effects)) if me else ())  # an FMI 3.0 FMU per effects
@@ -145,15 +152,22 @@ def _worker_dir() -> Path:
 
 def _start_worker(lifeline) -> None:
     """A pool worker's initializer. It imports what a run needs, as the pool starts (beside the
-    parent's own preparation, not after it); it skips the last garbage collections at exit
-    (gc.freeze, as crankfmu.cli does: the parent waits for its workers to end); it ends this
-    worker with its parent (_end_with_parent), and on SIGTERM (what the pool sends the other
-    workers when one died) with its temporary folders."""
+    parent's own preparation, not after it); it shows Python warnings on one line each, as the
+    command line does (not with the source line of the warning, between a study's table rows);
+    it skips the last garbage collections at exit (gc.freeze, as crankfmu.cli does: the parent
+    waits for its workers to end); it ends this worker with its parent (_end_with_parent), and
+    on SIGTERM (what the pool sends the other workers when one died) with its temporary
+    folders."""
     import atexit
     import gc
     import signal
+    import sys
+    import warnings
 
     import crankfmu.cosim.runner  # noqa: F401 - fmpy, lxml, the masters, the wiring
+    from ..errors import warning_text
+    warnings.showwarning = lambda message, category, *where, **_: print(
+        f"warning: {warning_text(message, category)}", file=sys.stderr, flush=True)
     atexit.register(gc.freeze)
     signal.signal(signal.SIGTERM, lambda signum, frame: threading.Thread(
         target=_leave, args=(128 + signum,), daemon=True).start())  # the lock may be held here
@@ -230,6 +244,7 @@ def execute(task: RunTask, files: dict) -> RunOutput:
 
 def _execute(task: RunTask, files: dict) -> RunOutput:
     from ..cosim.runner import RunError, RunOptions, run_scene
+    from ..errors import InterruptedRun
 
     out = RunOutput(task.key, "completed", worker=f"{socket.gethostname()}:{os.getpid()}")
     scene = copy.deepcopy(task.scene)
@@ -244,6 +259,8 @@ def _execute(task: RunTask, files: dict) -> RunOutput:
         out.statistics, out.master_statistics = result.statistics, result.master_statistics
         out.coupling_error = result.coupling_error
         out.units = list(result.recorder.units)
+    except InterruptedRun:  # Ctrl-C: the study stops (InProcessExecutor), no failed row
+        raise
     except RunError as err:
         out.status = "failed"
         out.reason = str(err).replace(f" (results up to then: {err.csv})", "")
@@ -347,11 +364,26 @@ class Executor:
         self.close()
 
 
+class InProcessExecutor(Executor):
+    """Every run in this process, one after another (jobs = 1): what `crankfmu run` does, so a
+    study costs no worker start-up (an interpreter and the imports a run needs: about 0.3 s of
+    CPU) and a plain script calling crankfmu.sweep or crankfmu.accuracy works without a main
+    guard. A run that kills its process takes the study with it: jobs >= 2 isolates the runs in
+    worker processes."""
+
+    description = "this process"
+
+    def _run(self, tasks, files, done) -> None:
+        local = {d: str(p) for d, p in files.items()}
+        for i, task in enumerate(tasks):
+            done(i, execute(task, local))
+
+
 class LocalPoolExecutor(Executor):
-    """A local process pool of `jobs` workers (default: the number of cores). jobs = 1 is a pool
-    of one: the parent never loads an FMU, so nothing an FMU does (pythonfmu 0.7.0 can leave the
-    interpreter corrupt after a Python exception in an FMU: a later run in the same process has
-    segfaulted in the garbage collector) can take the study down. A worker process that dies
+    """A local process pool of `jobs` workers (default: the number of cores): the parent never
+    loads an FMU, so nothing an FMU does (pythonfmu 0.7.0 can leave the interpreter corrupt
+    after a Python exception in an FMU: a later run in the same process has segfaulted in the
+    garbage collector) can take the study down. A worker process that dies
     breaks the pool (BrokenProcessPool): the pool is restarted and the runs that were in flight
     are run again, one at a time (so the one that kills its worker is found); a run lost a
     second time, alone, is returned as "lost" with the reason. At most `jobs` runs are in
@@ -371,13 +403,24 @@ class LocalPoolExecutor(Executor):
     def _new_pool(self):
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
+
+        from ..cosim.companions import guarded_start
         context = multiprocessing.get_context("spawn")
         self._lifeline = context.Pipe(duplex=False)
         pool = ProcessPoolExecutor(max_workers=self.jobs, mp_context=context,
                                    initializer=_start_worker, initargs=(self._lifeline[0],))
-        for _ in range(self.jobs):  # each submit to a pool without an idle worker starts one
-            pool.submit(_ready)
+        with guarded_start():  # each submit to a pool without an idle worker starts one
+            self._started = [pool.submit(_ready) for _ in range(self.jobs)]
         return pool
+
+    def _check_started(self) -> None:
+        """After the pool broke: if no worker of it ever started (each died while it imported
+        the script or crankfmu), raise WorkerStartError; running the study again would only
+        start more workers that die the same way."""
+        from ..cosim.companions import MAIN_GUARD, WorkerStartError
+        if not any(f.done() and f.exception() is None for f in self._started):
+            raise WorkerStartError(f"the worker processes ended as they started, before any "
+                                   f"run; {MAIN_GUARD} (the workers' own messages are above)")
 
     def _close_pool(self) -> None:
         self._pool.shutdown(wait=True, cancel_futures=True)
@@ -424,7 +467,10 @@ class LocalPoolExecutor(Executor):
                     fut.exception()
                     lost.append(i)
                 running.clear()
+                started = self._started
                 self._close_pool()
+                self._started = started
+                self._check_started()
                 for i in sorted(lost, reverse=True):
                     losses[i] += 1
                     if losses[i] >= self.max_losses:
@@ -544,8 +590,12 @@ class DaskExecutor(Executor):
             self.client.close()
 
 
-def make_executor(jobs: int | None = None, scheduler: str | None = None, client=None) -> Executor:
-    """--scheduler ADDRESS (or a distributed.Client) gives a DaskExecutor, else a local pool."""
+def make_executor(jobs: int | None = 1, scheduler: str | None = None, client=None) -> Executor:
+    """--scheduler ADDRESS (or a distributed.Client) gives a DaskExecutor; else --jobs N
+    (cosim.companions.processes: 0 is one per core; None is 1): 1 an InProcessExecutor, more a
+    LocalPoolExecutor of that many workers."""
+    from ..cosim.companions import processes
     if client is not None or scheduler:
         return DaskExecutor(scheduler, client=client)
-    return LocalPoolExecutor(jobs)
+    count = processes(1 if jobs is None else jobs)
+    return InProcessExecutor() if count == 1 else LocalPoolExecutor(count)

@@ -75,15 +75,15 @@ def eq28_against(press, motor, u0: float, parameter: str = "m5", values=None) ->
 
 def format_conventions(conv: dict, name: str) -> str:
     lines = [f"{name}: eq. (28), l = 1, theta = 0, omega0 = {conv['omega0']:.5g} rad/s, "
-             f"J_D = {conv['J_D']:.5g} kg m^2, s = {conv['s']:.5g} N m s/rad",
-             f"{'convention':>10} {'J_M0 [kg m^2]':>14} {'J_Mx crank [kg m^2]':>20} "
-             f"{'J_Mx motor [kg m^2]':>20}"]
+             f"J_D = {conv['J_D']:.5g} kg.m2, s = {conv['s']:.5g} N.m.s/rad",
+             f"{'convention':>10} {'J_M0 [kg.m2]':>14} {'J_Mx crank [kg.m2]':>20} "
+             f"{'J_Mx motor [kg.m2]':>20}"]
     for c in ("paper", "mean"):
         d = conv[c]
         lines.append(f"{c:>10} {d['J_M0']:>14.6f} {d['J_Mx']:>20.6f} {d['J_Mx_motor']:>20.7f}"
                      f"   {CONVENTIONS[c]}")
     lines.append(f"difference (mean - paper)/paper: {100 * conv['relative']:+.3f} % "
-                 f"(J_M0 differs by {conv['mean']['J_M0'] - conv['paper']['J_M0']:.6f} kg m^2)")
+                 f"(J_M0 differs by {conv['mean']['J_M0'] - conv['paper']['J_M0']:.6f} kg.m2)")
     return "\n".join(lines)
 
 
@@ -106,8 +106,10 @@ def analytic(scene, J_f: np.ndarray, motor: str = "motor", press: str = "press")
                             u0)
     i2 = model.p.gear_ratio ** 2
     W, J_D, J_M0, s = conv["omega0"], conv["J_D"], conv["mean"]["J_M0"], conv["s"]
+    from .progress import progress_over
     return {
-        "delta_1": np.array([pa.dynamic_error(drive(j), lag=lag).delta for j in J_f]),
+        "delta_1": np.array([pa.dynamic_error(drive(j), lag=lag).delta for j in
+                             progress_over(J_f, "analyze flywheel", "flywheel")]),
         "ratio_26": np.array([math.sqrt(pa.flywheel_ratio(j * i2, W, J_D, J_M0, s))
                               for j in J_f]),
         "J_Mx": conv["mean"]["J_Mx_motor"], "J_Mx_crank": conv["mean"]["J_Mx"],
@@ -127,13 +129,13 @@ def report(table_csv: Path, scene, out_dir: Path | None = None, plot: bool = Fal
     J = np.array([r[PARAMETER] for r in rows])
     delta = np.array([r["delta"] for r in rows])
     a = analytic(scene, J)
-    lines = [f"{'J_flywheel [kg m^2]':>20}{'delta (sweep)':>15}{'delta_1':>10}{'sqrt(26)':>10}"]
+    lines = [f"{'J_flywheel [kg.m2]':>20}{'delta (sweep)':>15}{'delta_1':>10}{'sqrt(26)':>10}"]
     for j, d, d1, r26 in zip(J, delta, a["delta_1"], a["ratio_26"]):
         lines.append(f"{j:>20.4g}{d:>15.4%}{d1:>10.4%}{r26:>10.4f}")
-    lines.append(f"(28): J_Mx = {a['J_Mx_crank']:.4g} kg m^2 at the crank = {a['J_Mx']:.4g} "
-                 f"kg m^2 on the motor shaft (l = 1, omega0 = {a['omega0']:.5g} rad/s)")
+    lines.append(f"(28): J_Mx = {a['J_Mx_crank']:.4g} kg.m2 at the crank = {a['J_Mx']:.4g} "
+                 f"kg.m2 on the motor shaft (l = 1, omega0 = {a['omega0']:.5g} rad/s)")
     lines.append(f"      in the paper's convention J_M0 = J1 + J_2O: J_Mx = {a['J_Mx_paper']:.4g} "
-                 f"kg m^2 on the motor shaft ({100 * (a['J_Mx'] / a['J_Mx_paper'] - 1):+.2f} % "
+                 f"kg.m2 on the motor shaft ({100 * (a['J_Mx'] / a['J_Mx_paper'] - 1):+.2f} % "
                  f"from it: the product's J_M0 adds m5 <S'^2>)")
     written = []
     if out_dir is not None:

@@ -30,7 +30,6 @@ modules' (nothing in physics/ imports this module).
 """
 from __future__ import annotations
 
-import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,9 +37,9 @@ from pathlib import Path
 import numpy as np
 
 from ..system.scene import SceneError
+from .progress import progress, progress_over  # noqa: F401 - progress: the analyses' notes
 
 TWO_PI = 2.0 * math.pi
-progress = logging.getLogger("crankfmu").info   # notes on stderr (-q hides them)
 A_FIGURE = 0.08  # m: base-link offset drawn in press_base_link.png (triangle height, ~ l/3)
 
 
@@ -433,11 +432,14 @@ def figure_flywheel(d: dict):
 
 def press_figures(scene, out_dir: Path) -> list[Path]:
     press, m_static, m_lag, u0 = press_models(scene)
-    progress("analyze press: dynamic errors, base-link offset, flywheel")
-    figures = {"press_dynamic_error.png": figure_dynamic_error(
-                   dynamic_error_data(press, m_static, m_lag, u0)),
-               "press_base_link.png": figure_base_link(base_link_data(press)),
-               "press_flywheel.png": figure_flywheel(flywheel_data(press, m_static, u0))}
+    progress("analyze press: the figures of the dynamic errors, the base-link offset, the "
+             "flywheel")
+    drawn = {"press_dynamic_error.png": lambda: figure_dynamic_error(
+                 dynamic_error_data(press, m_static, m_lag, u0)),
+             "press_base_link.png": lambda: figure_base_link(base_link_data(press)),
+             "press_flywheel.png": lambda: figure_flywheel(flywheel_data(press, m_static, u0))}
+    figures = {name: draw() for name, draw in progress_over(drawn.items(), "analyze press",
+                                                             "figure")}
     return save_figures(figures, out_dir)
 
 

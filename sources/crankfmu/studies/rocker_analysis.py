@@ -35,14 +35,13 @@ from typing import Sequence
 import numpy as np
 
 # the linear theory lives in the FMU runtime (rocker_linear); re-exported for the analyses
-from ..models.rocker_impact.rocker_linear import (ITERATION_RTOL, K_N_VALUES, P_GUESS, S_FACTORS,
-                                                  T_GUESS_RATIO, AnalysisError, Coefficients,
-                                                  FirstApproximation, ImpactResult, LinearFlow,
-                                                  Linearisation, RockerData, Signal, _grid_size,
+from ..models.rocker_impact.rocker_linear import (ITERATION_RTOL, K_N_VALUES, S_FACTORS,
+                                                  AnalysisError, Coefficients,
+                                                  FirstApproximation, LinearFlow,
+                                                  Linearisation, RockerData, _grid_size,
                                                   coefficients, exact_linear, extremum,
                                                   first_approximation, first_return_to_zero,
-                                                  hertz_constant, linearise,
-                                                  linearised_contact_stiffness, support_stiffness)
+                                                  linearise, support_stiffness)
 
 
 # -- second approximation -------------------------------------------------------------------
@@ -264,7 +263,7 @@ def claims(rows: Sequence[TableRow]) -> list[Claim]:
     for f in dict.fromkeys(r.S_factor for r in rows):
         rs = sorted((r for r in rows if r.S_factor == f), key=lambda r: r.k_n)
 
-        def add(text, holds, measured):
+        def add(text, holds, measured, f=f):  # called at once: f is this reading's
             out.append(Claim(f, text, bool(holds), measured))
         add("Pm about 1 MN (within 10 %)", all(0.9e6 < r.Pm < 1.1e6 for r in rs),
             ", ".join(f"{r.Pm / 1e3:.0f} kN" for r in rs))

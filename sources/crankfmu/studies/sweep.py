@@ -8,22 +8,24 @@ last parameter varies fastest). With `samples=N`, a Latin hypercube of N points 
 parameter's range (START:STOP, or the min and max of a value list), scipy.stats.qmc with `seed`
 (default 0: the same points on every call, so a sweep resumes).
 
-Each run executes through one executor (local process pool, or a Dask cluster:
-crankfmu.studies.executor); in the worker, its figures are computed from the scene's
+Each run executes through one executor (this process, a local process pool, or a Dask cluster:
+crankfmu.studies.executor); where it runs, its figures are computed from the scene's
 [analysis] table with crankfmu.studies.compare's metric code: strokes, cycle time, mean crank speed,
 delta, energy per stroke, peak drive and load torque, and the [analysis].events variables at the
 run's end (hybrid scenes). DIR/sweep.csv holds one row per run: `run`, one column per varied
 parameter (named COMP.PARAM), the figures, `status` (completed; "figures missing" when the run
 completed without all its figures, e.g. no whole revolution after from_time; "unreliable" when
 its port energy says it lost the solution, crankfmu.cosim.trust; failed, refused, error, lost),
-`reason` (why, for every status but completed) and `wall_seconds`; rows are appended as runs
+`reason` (why, for every status but completed) and `wall_time`; rows are appended as runs
 finish and the file is rewritten in grid order at the end. At most MAX_RUNS points, counted
 before the grid is made; values must be finite; the analysis window must start before the stop
 time; the output folder and its names are checked, and the folder locked, before any run
-(crankfmu.outputs). DIR/sweep.json names the study (scene, settings, grid, FMU digests): a
-second call with the same study keeps the rows already there and runs only the missing ones
-(and the "lost" ones: a worker died); another study in the same DIR is refused.
-DIR/sweep.png plots each figure against each varied parameter.
+(crankfmu.outputs). DIR/sweep.json names the study (scene, settings, grid, FMU digests) and
+the unit of each column of sweep.csv ("units": a parameter's and an event variable's as its
+FMU declares it, a figure's, "s" for wall_time, null for text): a second call with the same
+study keeps the rows already there and runs only the missing ones (and the "lost" ones: a
+worker died); another study in the same DIR is refused. With `plot`, DIR/sweep.png plots each
+figure against each varied parameter.
 """
 from __future__ import annotations
 
@@ -39,16 +41,19 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cosim.results import check_record_size, save_figure
+from ..cosim.results import check_record_size, normalize_unit, save_figure
 from ..errors import MAX_STUDY_RUNS, CrankfmuError
 from ..outputs import atomic_write, check_files, folder_lock, open_regular
 from ..system.scene import Scene, SceneError, _number, apply_overrides, check_run_size
+from .compare import UNITS as FIGURE_UNITS
 from .compare import check_window
 from .executor import make_executor
+from .table import Table
 
 FIGURES = ("strokes", "cycle_time", "mean_crank_speed", "delta", "energy_per_stroke",
            "peak_drive_torque", "peak_load_torque")
-TAIL = ("status", "reason", "wall_seconds")
+TAIL = ("status", "reason", "wall_time")
+TAIL_UNITS = {"run": None, "status": None, "reason": None, "wall_time": "s"}
 RERUN = ("lost",)  # statuses a resumed sweep runs again
 MISSING = "figures missing"  # status of a run that completed without all its figures
 MAX_RUNS = MAX_STUDY_RUNS  # points of one sweep, counted before the grid is made (`--vary
@@ -199,22 +204,19 @@ def figure_names(roles: dict) -> list[str]:
 
 # -- the table ---------------------------------------------------------------------------------------
 @dataclass
-class SweepTable:
-    """The sweep's rows (dicts column -> value) in run order, and where they were written."""
+class SweepTable(Table):
+    """The sweep's rows (dicts column -> value) in run order, the unit of each column, and where
+    they were written (None: not written, e.g. the API without `out`); `to_pandas()`."""
 
     columns: list[str]
     rows: list[dict]
     parameters: list[str]
     figures: list[str]
-    csv: Path
+    csv: Path | None
     png: Path | None = None
     executed: int = 0          # runs executed by this call (the others came from sweep.csv)
-
-    def column(self, name: str) -> np.ndarray:
-        return np.array([r[name] for r in self.rows], dtype=float)
-
-    def __len__(self) -> int:
-        return len(self.rows)
+    units: dict = dataclasses.field(default_factory=dict)  # column -> unit (None: text)
+    sidecar: Path | None = None                            # sweep.json
 
 
 def _format(value) -> str:
@@ -267,16 +269,18 @@ def _row_key(row: dict, parameters: list[str]) -> tuple:
 
 
 # -- the sweep -------------------------------------------------------------------------------------
-def sweep(scene, vary, out, *, jobs: int | None = None, scheduler: str | None = None,
+def sweep(scene, vary, out, *, jobs: int | None = 1, scheduler: str | None = None,
           client=None, executor=None, stop_time: float | None = None,
           from_time: float | None = None, samples: int | None = None, seed: int = 0,
-          overrides=(), fmu_dir=None, progress=None, plot: bool = True,
+          overrides=(), fmu_dir=None, progress=None, plot: bool = False,
           names: dict = CLI_NAMES) -> SweepTable:
     """Run the sweep into folder `out` and return its table (see the module's docstring).
 
     scene      a Scene or a path to a scene file (it needs an [analysis] table)
     vary       list of "COMP.PARAM=..." strings or Vary objects
-    jobs       local worker processes (default: the number of cores; 1 = one worker)
+    jobs       1 (default): every run in this process; N > 1: N worker processes (a script
+               needs `if __name__ == "__main__":`, cosim.companions.MAIN_GUARD); 0: one per
+               core
     scheduler  "tcp://HOST:PORT" of a Dask scheduler (or `client`: a distributed.Client);
                `executor`: any crankfmu.studies.executor.Executor (not closed here)
     stop_time  end of every run [s]; from_time: start of the analysis window [s]
@@ -359,10 +363,13 @@ def _run_grid(scene, roles, parameters, points, out: Path, samples, seed, execut
                              keep_series=False))
     try:
         files = prepare_tasks(tasks[:1], fmu_dir)  # builds the FMUs once, here
-        _check_parameters(scene, parameters, tasks[0].fmus, files, names["vary"])
+        declared = _check_parameters(scene, parameters, tasks[0].fmus, files, names["vary"])
         fmus = {n: d for n, (d, _) in tasks[0].fmus.items()}
         figures = figure_names(roles)
         columns = ["run"] + parameters + figures + list(TAIL)
+        units = {c: declared[c] if c in declared else TAIL_UNITS[c] if c in TAIL_UNITS
+                 else FIGURE_UNITS.get(c) or _variable_unit(c, tasks[0].fmus, files)
+                 for c in columns}
         key = _study_key(scene, points, fmus)
         kept = _resume(out, key, columns, parameters, names["out"])
         table_csv = out / "sweep.csv"
@@ -374,7 +381,7 @@ def _run_grid(scene, roles, parameters, points, out: Path, samples, seed, execut
             if row is not None:
                 rows_by_run[k] = {**row, "run": k}
         text = json.dumps({"study": key, "varied": parameters, "samples": samples, "seed": seed,
-                           "figures": figures}, indent=2, default=str) + "\n"
+                           "figures": figures, "units": units}, indent=2, default=str) + "\n"
         atomic_write(out / "sweep.json", lambda f: f.write(text))
         with open_regular(table_csv) as f:  # kept rows first, then rows as they finish
             csv.writer(f).writerow(columns)
@@ -398,14 +405,15 @@ def _run_grid(scene, roles, parameters, points, out: Path, samples, seed, execut
     finally:
         if own:
             executor.close()
-    return SweepTable(columns, rows, parameters, figures, table_csv, executed=len(todo))
+    return SweepTable(columns, rows, parameters, figures, table_csv, executed=len(todo),
+                      units=units, sidecar=out / "sweep.json")
 
 
 def _row(output, point: dict, figures: list[str]) -> dict:
     """A run's row: its point, figures, and a status that says why figures are missing
     (MISSING) or not to be trusted ("unreliable": crankfmu.cosim.trust)."""
     found = output.figures.get("values", {})
-    row = {"run": output.key, **point, "wall_seconds": float(output.wall_seconds)}
+    row = {"run": output.key, **point, "wall_time": float(output.wall_seconds)}
     for name in figures:
         row[name] = float(found.get(name, math.nan))
     status = output.status
@@ -420,17 +428,40 @@ def _row(output, point: dict, figures: list[str]) -> dict:
 
 
 def _check_parameters(scene, parameters, fmus: dict, files: dict, option: str = "--vary"
-                      ) -> None:
-    """Fail before running anything when a varied parameter does not exist."""
-    from fmpy import read_model_description
-
+                      ) -> dict[str, str]:
+    """Fail before running anything when a varied parameter does not exist; returns each
+    parameter's unit as its FMU declares it."""
+    units = {}
     for ref in parameters:
         comp, param = ref.split(".", 1)
-        md = read_model_description(str(files[fmus[comp][0]]))
-        allowed = [v.name for v in md.modelVariables if v.causality == "parameter"]
-        if param not in allowed:
+        declared = {v.name: v for v in _model_variables(files[fmus[comp][0]])
+                    if v.causality == "parameter"}
+        if param not in declared:
             raise SceneError(scene.path, f"{option} {ref}", f"{comp} has no parameter "
-                             f"{param!r}; parameters: {', '.join(allowed)}")
+                             f"{param!r}; parameters: {', '.join(declared)}")
+        units[ref] = normalize_unit(_unit(declared[param]))
+    return units
+
+
+def _model_variables(path: Path) -> list:
+    from fmpy import read_model_description
+    return read_model_description(str(path)).modelVariables
+
+
+def _unit(variable) -> str | None:
+    """A model variable's unit as fmpy reads it (its own, else its declared type's)."""
+    declared = getattr(variable, "declaredType", None)
+    return variable.unit or getattr(declared, "unit", None)
+
+
+def _variable_unit(ref: str, fmus: dict, files: dict) -> str | None:
+    """The unit of a recorded "comp.var" (an [analysis].events column) as its FMU declares it;
+    None when it is not found there."""
+    comp, name = ref.split(".", 1)
+    if comp not in fmus:
+        return None
+    found = [v for v in _model_variables(files[fmus[comp][0]]) if v.name == name]
+    return normalize_unit(_unit(found[0])) if found else None
 
 
 def _resume(out: Path, key: dict, columns: list[str], parameters: list[str],

@@ -25,7 +25,7 @@ def analysis_roles(scene) -> dict:
     if unknown:
         raise SceneError(scene.path, f"[analysis].{sorted(unknown)[0]}",
                          f"unknown key; allowed: {', '.join(allowed)}")
-    out = {}
+    out: dict = {}
     for role in ROLES + OPTIONAL:
         if role in raw:
             out[role] = _variable_ref(scene.path, f"[analysis].{role}", raw[role],

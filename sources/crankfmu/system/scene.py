@@ -93,8 +93,9 @@ class Master:
     """The [master] table: the keys every master shares, and `options`, the values given for
     the masters' own options (extrapolation, tolerance, ...: declared by each master class in
     crankfmu.masters). An option reads as an attribute (`m.tolerance`): the value given,
-    else the chosen master's declared default; setting one (`m.tolerance = 1e-4`) stores it
-    unchecked (the master checks it when the run starts, the scene reader and `set_value` before)."""
+    else the chosen master's default (crankfmu.masters.option_default); setting one
+    (`m.tolerance = 1e-4`) stores it unchecked (the master checks it when the run starts, the
+    scene reader and `set_value` before)."""
     algorithm: str = "gauss-seidel"
     step: float = 1e-3
     fmu_tolerance: float = 1e-8   # each FMU's internal solver (fmi2SetupExperiment)
@@ -114,7 +115,8 @@ class Master:
         declared = _master_options().get(name)
         if declared is None:
             raise AttributeError(f"[master] has no key {name!r}")
-        return declared.default
+        from ..masters import option_default
+        return option_default(self.algorithm, declared)
 
     def __setattr__(self, name: str, value) -> None:
         if name in self.__dataclass_fields__:
@@ -317,7 +319,8 @@ def check_run_size(scene: "Scene", key: str = "[master].step") -> None:
     m, span = scene.master, scene.stop_time - scene.start_time
     limit = m.max_steps
     biggest = max(abs(scene.start_time), abs(scene.stop_time), 1.0)
-    variable = getattr(_masters().get(m.algorithm), "variable_step", False)
+    from ..masters import traits
+    variable = traits(m.algorithm).variable_step
     smallest, which = (m.min_step, "[master].min_step") if variable else (m.step, key)
     if not (math.isfinite(span) and span > 1e-13 * biggest):
         raise SceneError(scene.path, "[scene].stop_time", f"must exceed start_time = "

@@ -17,6 +17,7 @@ import io
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import cast
 
 from lxml import etree
 
@@ -82,8 +83,9 @@ def export_ssp(scene: Scene, path, fmu_dir=None) -> Path:
 
     path = Path(path)
     fmus = describe_fmus(scene, Path(fmu_dir) if fmu_dir else default_fmu_dir(scene))
-    check_components(scene, fmus)
-    check_links(scene, fmus)
+    loaded = cast(dict, fmus)  # a DescribedFmu offers what the checks read of an FmuInstance
+    check_components(scene, loaded)
+    check_links(scene, loaded)
     sources = resource_names(scene, fmus)
     ssd = ssd_document(scene, fmus, sources)
     write_archive(path, ssd, {sources[c]: fmus[c].path for c in scene.components})
@@ -92,8 +94,10 @@ def export_ssp(scene: Scene, path, fmu_dir=None) -> Path:
 
 def lossy_parts(scene: Scene, fmus: dict[str, DescribedFmu]) -> list[str]:
     """What other SSP tools will not see of this scene (crankfmu reads it all back)."""
-    notes = [f"master settings (algorithm {scene.master.algorithm}, extrapolation "
-             f"{scene.master.extrapolation}, order) are in the {SCENE_ANNOTATION} annotation; "
+    m = scene.master
+    coupling = f"taylor {m.taylor}" if m.taylor else f"extrapolation {m.extrapolation}"
+    notes = [f"master settings (algorithm {m.algorithm}, {coupling}, order) are in the "
+             f"{SCENE_ANNOTATION} annotation; "
              "other tools use their own master (libcosim takes the step from the OSP annotation)"]
     if scene.master.fmu_tolerance != DEFAULT_TOLERANCE:
         notes.append(f"fmu_tolerance {scene.master.fmu_tolerance:g}: other tools give the FMUs no "

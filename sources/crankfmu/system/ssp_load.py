@@ -25,7 +25,7 @@ from .scene import Scene, SceneError, parse_scene
 from .ssp_export import (FMU_TYPE, NS, OSP_ANNOTATION, PARAMETER_SET_TYPE, SCENE_ANNOTATION,
                          SSD_NAME, q)
 
-SCHEMA_DIR = Path(__import__("fmpy").__file__).parent / "ssp" / "schema"
+SCHEMA_DIR = Path(str(__import__("fmpy").__file__)).parent / "ssp" / "schema"
 FLOAT_KEYS = ("step", "fmu_tolerance")  # the common [master] keys; the masters' own options
 INT_KEYS = ("max_steps",)                # take their type from their declaration
 # Limits on a (possibly hostile) archive, checked while streaming each entry out of the zip:
@@ -62,7 +62,7 @@ def load_ssp(path) -> Scene:
     except BaseException:
         shutil.rmtree(folder, ignore_errors=True)
         raise
-    scene.extracted = folder  # type: ignore[attr-defined]  (what the FMU paths point into)
+    scene.extracted = folder  # type: ignore[attr-defined]  # what the FMU paths point into
     weakref.finalize(scene, shutil.rmtree, str(folder), True)
     return scene
 
@@ -199,7 +199,8 @@ def _scene_data(path: Path, root, archive: zipfile.ZipFile, folder: Path, budget
     _refuse(path, system, ["ssd:Connectors", "ssd:SignalDictionaries",
                            "ssd:Elements/ssd:System", "ssd:Elements/ssd:SignalDictionaryReference"],
             "crankfmu runs a flat system of FMU components")
-    components, variables = {}, {}
+    components: dict = {}
+    variables: dict = {}
     for node in system.findall("ssd:Elements/ssd:Component", NS):
         name = node.get("name")
         if name in components:

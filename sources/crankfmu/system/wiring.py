@@ -13,12 +13,10 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from .scene import Scene, SceneError
 from ..fmu.archive import fmu_file_problem
 from ..fmu.instance import FmuInstance
-from ..fmu.instance3 import CO_SIMULATION, feedthrough, value_type
+from ..fmu.instance3 import feedthrough, value_type
 
 log = logging.getLogger(__name__)
 
@@ -59,20 +57,13 @@ def resolve_fmu(scene: Scene, comp_name: str, fmu_dir: Path,
         path = fmu_dir / f"{ref}.fmu"
         rebuild = rebuild_reason(path, ref)
         build = functools.partial(build_fmu, ref, fmu_dir)
+    warn_once_if_tree_differs(scene.path.resolve().parent.parent)
     if rebuild is not None:
         from ..fmu.build import PACKAGE_DIR
         (log.warning if rebuild.damaged else log.info)(
             "building %s (%s) from %s", path, rebuild.reason, PACKAGE_DIR)
-        warn_if_tree_differs(scene.path.resolve().parent.parent)
         build()
     return path
-
-
-def master_interface(algorithm: str) -> str:
-    """The FMI interface the master steps the FMUs through: "CoSimulation", or "ModelExchange"
-    (the model-exchange master: every FMU's Model Exchange interface, as one ODE)."""
-    from ..masters import MASTERS
-    return getattr(MASTERS.get(algorithm), "interface", CO_SIMULATION)
 
 
 def _check_fmi_version(scene: Scene, comp_name: str, path: Path) -> None:
@@ -112,6 +103,20 @@ def warn_if_tree_differs(tree: Path) -> None:
                     "editable (pip install -e %s)", PACKAGE_DIR, tree / "sources" / "crankfmu",
                     ", ".join(differ[:3]), f" and {len(differ) - 3} more" if len(differ) > 3
                     else "", tree)
+
+
+_TREES_CHECKED: set[Path] = set()
+
+
+def warn_once_if_tree_differs(tree: Path) -> None:
+    """warn_if_tree_differs, once per source tree and process: every command that uses a
+    catalog FMU says that an edit in the tree beside the scene is not used, built or not (after
+    a plain `pip install .` the FMUs in fmus/ are current for the installed copy, so nothing
+    was rebuilt and nothing said so). In a tree the package was imported from (an editable
+    install, PYTHONPATH) it costs two stats."""
+    if tree not in _TREES_CHECKED:
+        _TREES_CHECKED.add(tree)
+        warn_if_tree_differs(tree)
 
 
 @dataclass
@@ -306,7 +311,8 @@ class System:
                                for l in links if l.target == c] for c in fmus}
         self.read_outputs = {c: fmus[c].reader(self.out_names[c]) for c in fmus}
         self.write_inputs = {c: fmus[c].writer(self.in_names[c]) for c in fmus}
-        self.outputs = {c: np.zeros(len(self.out_names[c])) for c in fmus}
+        # each component's connected outputs as a list of floats, replaced at every read
+        self.outputs = {c: [0.0] * len(self.out_names[c]) for c in fmus}
         self.external = {c: [(s.target.split(".", 1)[1], s) for s in scene.inputs.values()
                              if s.target.split(".", 1)[0] == c] for c in fmus}
         self.write_external = {c: fmus[c].writer([n for n, _ in self.external[c]]) for c in fmus}
@@ -314,11 +320,13 @@ class System:
         self.external_varies = {c: any(len(s.times) > 1 for _, s in self.external[c])
                                 for c in fmus}
 
-    def refresh_outputs(self, comp: str) -> np.ndarray:
-        self.outputs[comp] = self.read_outputs[comp]().copy()
-        return self.outputs[comp]
+    def refresh_outputs(self, comp: str) -> list[float]:
+        """Read comp's connected outputs into a new list (the masters' history keeps the
+        old one)."""
+        values = self.outputs[comp] = self.read_outputs[comp]()
+        return values
 
-    def gather_inputs(self, comp: str, outputs: dict[str, np.ndarray] | None = None) -> list[float]:
+    def gather_inputs(self, comp: str, outputs: dict | None = None) -> list[float]:
         outputs = self.outputs if outputs is None else outputs
         return [outputs[src][k] for src, k in self.in_sources[comp]]
 

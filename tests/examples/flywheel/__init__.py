@@ -1,1 +1,1 @@
-"""An example model folder (README.md here): the walk-through of the README's "Adding a model"."""
+"""An example model folder (README.md here): the walk-through of docs/models.md, "Adding a model"."""

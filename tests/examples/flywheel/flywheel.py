@@ -1,5 +1,5 @@
 """A flywheel with viscous friction, driven by a torque: the example of adding a model
-(README.md here; the walk-through is in the project README, section "Adding a model")."""
+(README.md here; the walk-through is docs/models.md, section "Adding a model")."""
 from __future__ import annotations
 
 from ...runtime.model import ParameterError, PhysicsModel, Variable

@@ -1,4 +1,4 @@
-"""An example master, kept small to show what adding one takes (README "Adding a master").
+"""An example master, kept small to show what adding one takes (docs/masters.md, "Adding a master").
 
 Iterated Gauss-Seidel (waveform relaxation): a Gauss-Seidel sweep with held inputs, then
 `sweeps - 1` more passes over the same step, each rolled back to t with every input interpolated

@@ -10,7 +10,7 @@ import numpy as np
 
 from ...runtime import closed_form as cf
 from ...runtime.model import (Effect, IntegrationError, ParameterError, PhysicsModel, Variable,
-                              quadratic_coefficients)
+                              input_rows)
 
 SATURATION_SAMPLES = 8  # bracketing points for leaving the voltage limit (a smooth function)
 AT_LIMIT = 1e-12       # relative band in which U_c counts as at the voltage limit
@@ -56,6 +56,7 @@ class DcServoMotor(PhysicsModel):
         Variable("P_shaft", "W", "Mechanical power M*w delivered to the shaft",
                  depends_on=("flange_w", "u", "w_ref")),
     )
+    derivative_outputs = ("flange_tau", "flange_J")  # the shaft port (flange_J is constant)
 
     def check(self, p):
         if p.R_a <= 0.0:
@@ -69,6 +70,11 @@ class DcServoMotor(PhysicsModel):
             raise ParameterError(self.model_name, "k_p" if p.k_p <= 0 else "k_i",
                                  p.k_p if p.k_p <= 0 else p.k_i,
                                  "> 0 when effect speed_loop is on")
+
+    @property  # read-only here: the answer follows the effects (runtime/model.py: a class flag)
+    def derivative_outputs_affine(self) -> bool:  # type: ignore[override]
+        """With the lag the torque is the state M; without it, the clipped static law."""
+        return self.on("electrical_lag")
 
     # derived constants of eq. (4)
     @property
@@ -153,20 +159,19 @@ class DcServoMotor(PhysicsModel):
 
     # -- closed-form step ------------------------------------------------------------------
     def advance(self, t0, x0, h, u_of_t, rtol, atol):
-        taylor = quadratic_coefficients(u_of_t, t0, h) if self.solver != "scipy" else None
-        if not x0 or h <= 0.0 or taylor is None:
+        rows = input_rows(u_of_t, t0, h) if self.solver != "scipy" else None
+        if not x0 or h <= 0.0 or rows is None:
             return super().advance(t0, x0, h, u_of_t, rtol, atol)
         self._check_inputs(t0, u_of_t)
-        u, d1, d2 = taylor
         i_w, i_u = self.IN.flange_w, self.IN.u
-        w = [u[i_w], d1[i_w], 0.5 * d2[i_w]]    # shaft speed over the step, in s = t - t0
+        w = cf.taylor_polynomial(rows, i_w)    # shaft speed over the step, in s = t - t0
         lag, loop = self.on("electrical_lag"), self.on("speed_loop")
         M = x0[0] if lag else 0.0
         I = x0[-1] if loop else 0.0
         s = 0.0
         for _ in range(MAX_PIECES):
-            U, s_end, I_end = self._voltage_piece(s, h, I, u, d1, d2) if loop else \
-                ([u[i_u], d1[i_u], 0.5 * d2[i_u]], h, 0.0)
+            U, s_end, I_end = self._voltage_piece(s, h, I, rows) if loop else \
+                (cf.taylor_polynomial(rows, i_u), h, 0.0)
             if lag:
                 M = self._lag_over(M, U, w, s, s_end)
             I, s = I_end, s_end
@@ -175,12 +180,12 @@ class DcServoMotor(PhysicsModel):
         raise IntegrationError(f"{self.model_name}: more than {MAX_PIECES} voltage-limit "
                                f"switches in the step from t = {t0:.9g} s")
 
-    def _voltage_piece(self, s, h, I, u, d1, d2):
+    def _voltage_piece(self, s, h, I, rows):
         """(U(s') as a polynomial, end of the piece, I at its end) for the speed loop from s:
-        up to h or to where the voltage limit is reached or left."""
+        up to h or to where the voltage limit is reached or left (`rows`: the inputs' Taylor
+        rows at the step's start)."""
         p = self.p
-        i_ref, i_w = self.IN.w_ref, self.IN.flange_w
-        e = [u[i_ref] - u[i_w], d1[i_ref] - d1[i_w], 0.5 * (d2[i_ref] - d2[i_w])]  # w_ref - w
+        e = cf.taylor_polynomial(rows, self.IN.w_ref, self.IN.flange_w)  # w_ref - w
         e_local = cf.poly_shift(e, s)
         I_poly = cf.poly_add([I], cf.poly_integral(e_local), scales=[1.0, p.k_i])
         U_free = cf.poly_add(I_poly, e_local, scales=[1.0, p.k_p])   # in sigma = s' - s
@@ -190,7 +195,7 @@ class DcServoMotor(PhysicsModel):
         at_limit = abs(abs(level) - limit) <= AT_LIMIT * limit
         saturated = slope * level > 0.0 if at_limit else abs(level) > limit
         if not saturated:
-            criticals = cf.poly_critical_points(U_free)
+            criticals = cf.poly_critical_points(U_free, 0.0, h - s)
             edges = [r for c in (limit, -limit) for r in cf.sign_changes(
                 lambda x, c=c: cf.poly_value(U_free, x) - c, 0.0, h - s, criticals)]
             end = min([h - s] + [r for r in edges if r > 0.0])
@@ -215,7 +220,7 @@ class DcServoMotor(PhysicsModel):
         span = s_end - s
         if sum(abs(a) * span ** k for k, a in enumerate(local)) < limit:  # no limit in reach
             return cf.lag_step(M, local, span, self.tau)
-        criticals = cf.poly_critical_points(local)
+        criticals = cf.poly_critical_points(local, 0.0, span)
         cuts = [r for c in (limit, -limit) for r in cf.sign_changes(
             lambda x, c=c: cf.poly_value(local, x) - c, 0.0, span, criticals)]
         points = [0.0] + sorted(cuts) + [span]

@@ -1,5 +1,5 @@
 """Cold pipe rolling mill stand drive: twin crank-slider with assembly preload, pin friction and
-rolling load (seed mill_stand_drive_structure; MODELS.md section 5).
+rolling load (seed mill_stand_drive_structure).
 Kinematics, reduced dynamics, preload, friction, variables and tests: README.md in this folder.
 """
 from __future__ import annotations
@@ -110,6 +110,9 @@ class MillStandDrive(PhysicsModel):
         Variable("shaft_J", "kg.m2", "Stand inertia at its input shaft J(phi)/i^2 (for a "
                  "rigidly coupled driver)", depends_on=("flange_J",) + _driven),
     )
+    # the shaft's motion, i phi' and i phi: affine in the state (and in the driver's shaft)
+    derivative_outputs = ("flange_w", "flange_phi")
+    derivative_outputs_affine = True
 
     def check(self, p):
         name = self.model_name

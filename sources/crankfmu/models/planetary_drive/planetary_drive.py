@@ -1,5 +1,5 @@
 """Planetary drive of a crank press with friction brakes on the ring and the carrier (seed
-planetary_drive_friction_clutch, eq. (1)-(10); MODELS.md section 3): three coupled Coulomb
+planetary_drive_friction_clutch, eq. (1)-(10)): three coupled Coulomb
 elements that lock and break free, brake laws, the four periods, a carrier port for a press.
 Equations, modes, events, variables, tests and the exact step (held inputs, exponential laws):
 the model card README.md in this folder.

@@ -1,5 +1,5 @@
-"""Crank-rocker hammer: a motor-driven crank swings RockerImpact's rocker through a spring rod
-(MODELS.md section 4), or follows a driver that integrates the shaft (effect driven_crank).
+"""Crank-rocker hammer: a motor-driven crank swings RockerImpact's rocker through a spring rod,
+or follows a driver that integrates the shaft (effect driven_crank).
 Geometry, equations, why a compliant rod, variables and tests: crank_rocker.md in this folder.
 """
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Rocker impact unit (seed rocker_impact_unit, eq. (1)-(2), (5)-(8); MODELS.md section 4): a
+"""Rocker impact unit (seed rocker_impact_unit, eq. (1)-(2), (5)-(8)): a
 rigid rocker on an elastic pivot support strikes a semi-infinite elastic rod; unilateral
 contact, linearised or Hertzian contact and bearing, events at contact begin/end and the peaks.
 Equations, events, variables and tests: the model card README.md in this folder.

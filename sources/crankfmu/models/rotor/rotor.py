@@ -5,11 +5,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...runtime.model import ParameterError, PhysicsModel, Variable, quadratic_coefficients
+from ...runtime.model import ParameterError, PhysicsModel, Variable, input_rows
 
 
 class LinearModel(PhysicsModel):
-    """x' = A x + B u; subclasses give `matrices()` -> (A, B)."""
+    """x' = A x + B u; subclasses give `matrices()` -> (A, B). Outputs offered with derivative
+    companions are affine in x and u (derivative_outputs_affine)."""
+
+    derivative_outputs_affine = True
 
     def matrices(self) -> tuple[np.ndarray, np.ndarray]:
         raise NotImplementedError
@@ -21,29 +24,39 @@ class LinearModel(PhysicsModel):
     def jacobian(self, t, x, u):
         return self.matrices()[0]
 
+    def state_rows(self, t, x, u_rows, order, delta, known=()):
+        """Exact: x^(k+1) = A x^(k) + B u^(k)."""
+        A, B = self.matrices()
+        rows = [np.asarray(x, dtype=float)]
+        for k in range(order):
+            u_k = u_rows[k] if k < len(u_rows) else np.zeros(B.shape[1])
+            rows.append(A @ rows[-1] + B @ np.asarray(u_k, dtype=float))
+        return [r.tolist() for r in rows]
+
     def advance(self, t0, x0, h, u_of_t, rtol, atol):
-        coeffs = quadratic_coefficients(u_of_t, t0, h)
-        if coeffs is None:  # not a quadratic in t: the numerical solver
+        rows = input_rows(u_of_t, t0, h)
+        if rows is None:  # not a polynomial in t: the numerical solver
             return super().advance(t0, x0, h, u_of_t, rtol, atol)
-        z = self._transition(h) @ np.concatenate([x0, *coeffs])
+        z = self._transition(h, len(rows)) @ np.concatenate([x0, *rows])
         return z[:len(x0)].tolist()
 
-    def _transition(self, h: float) -> np.ndarray:
-        """expm(M h) of the augmented system z = [x, u, u', u''] (u' and u'' are the input's
-        Taylor chain), cached per step size: a fixed-step run computes it once."""
+    def _transition(self, h: float, rows: int = 3) -> np.ndarray:
+        """expm(M h) of the augmented system z = [x, u, u', ..., u^(rows - 1)] (the input's
+        Taylor chain), cached per step size and chain: a fixed-step run computes it once."""
         cache = self.__dict__.setdefault("_transitions", {})
-        if h not in cache:
+        if (h, rows) not in cache:
             A, B = self.matrices()
             n, m = A.shape[0], B.shape[1]
-            M = np.zeros((n + 3 * m, n + 3 * m))
+            size = n + rows * m
+            M = np.zeros((size, size))
             M[:n, :n], M[:n, n:n + m] = A, B
-            M[n:n + m, n + m:n + 2 * m] = np.eye(m)
-            M[n + m:n + 2 * m, n + 2 * m:] = np.eye(m)
+            for k in range(rows - 1):  # d/dt u^(k) = u^(k + 1)
+                M[n + k * m:n + (k + 1) * m, n + (k + 1) * m:n + (k + 2) * m] = np.eye(m)
             if len(cache) > 256:  # variable steps: keep the cache small
                 cache.clear()
             from scipy.linalg import expm  # imported when used: ~0.3 s in every FMU process
-            cache[h] = expm(M * h)
-        return cache[h]
+            cache[h, rows] = expm(M * h)
+        return cache[h, rows]
 
 
 class Rotor(LinearModel):
@@ -63,6 +76,7 @@ class Rotor(LinearModel):
         Variable("flange_phi", "rad", "Rotor angle"),
         Variable("E", "J", "Stored energy J w^2/2 + c phi^2/2"),
     )
+    derivative_outputs = ("flange_w", "flange_phi")
 
     def check(self, p):
         if p.J <= 0.0:
@@ -106,6 +120,7 @@ class ShaftRotor(LinearModel):
         Variable("phi", "rad", "Rotor angle"),
         Variable("E", "J", "Stored energy J w^2/2 + k theta^2/2 + c phi^2/2"),
     )
+    derivative_outputs = ("flange_tau",)
 
     def check(self, p):
         if p.J <= 0.0:

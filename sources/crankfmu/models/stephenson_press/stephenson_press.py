@@ -73,6 +73,9 @@ class StephensonPress(PhysicsModel):
         Variable("shaft_J", "kg.m2", "Press inertia at its input shaft J(phi)/i^2 (for a rigidly "
                  "coupled driver)", depends_on=("flange_J",) + _driven),
     )
+    # the shaft's motion, i phi' and i phi: affine in the state (and in the driver's shaft)
+    derivative_outputs = ("flange_w", "flange_phi")
+    derivative_outputs_affine = True
 
     def check(self, p):
         if p.r <= 0.0:

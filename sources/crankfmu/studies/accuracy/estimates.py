@@ -14,13 +14,14 @@ from dataclasses import replace
 from pathlib import Path
 
 from ...cosim.estimate import companion_knobs, order_rule, richardson
-from .sweep import Outcome, Setting, is_monolithic, is_variable_step
+from ...masters import traits
+from .sweep import Outcome, Setting
 
 
 def companion_settings(setting: Setting) -> list[Setting]:
-    if is_monolithic(setting.algorithm):  # no coupling error: nothing to estimate
+    if traits(setting.algorithm).monolithic:  # no coupling error: nothing to estimate
         return []
-    knob, _, values = companion_knobs(is_variable_step(setting.algorithm), setting.step,
+    knob, _, values = companion_knobs(setting.algorithm, setting.step,
                                       setting.tolerance)
     return [replace(setting, **{knob: v}) for v in values]
 
@@ -52,7 +53,7 @@ def add_estimates(outcomes: list[Outcome], metric, runs_dir: Path) -> None:
         if o.status != "completed" and not o.unstable and not o.events_differ:
             continue
         s = o.setting
-        if is_monolithic(s.algorithm):
+        if traits(s.algorithm).monolithic:
             o.extra["estimated_error"] = None
             o.extra["estimate_reason"] = "no coupling error (the FMUs as one ODE)"
             continue
@@ -61,9 +62,9 @@ def add_estimates(outcomes: list[Outcome], metric, runs_dir: Path) -> None:
             o.extra["estimated_error"] = None
             o.extra["estimate_reason"] = "a companion run stopped or is missing"
             continue
-        variable = is_variable_step(s.algorithm)
-        knob, ratio, _ = companion_knobs(variable, s.step, s.tolerance)
-        est = richardson(metric, series, ratio, knob, *order_rule(variable, s.extrapolation))
+        knob, ratio, _ = companion_knobs(s.algorithm, s.step, s.tolerance)
+        est = richardson(metric, series, ratio, knob,
+                         *order_rule(s.algorithm, s.extrapolation, s.taylor))
         o.extra["estimated_error"] = est.error if est.ok else None
         if not est.ok:
             o.extra["estimate_reason"] = est.reason

@@ -7,32 +7,50 @@ from pathlib import Path
 
 from .sweep import Outcome
 
-COLUMNS = ("algorithm", "extrapolation", "step_s", "fmu_tolerance", "tolerance", "error",
-           "estimated_error", "wall_s", "doStep_calls", "rollbacks", "communication_steps", "status")
+# accuracy.csv's columns and their units (accuracy.json: "units"; None: text); taylor last:
+# the columns before it keep the places they had before it existed
+UNITS = {"metric": None, "algorithm": None, "extrapolation": "1", "step": "s",
+         "fmu_tolerance": "1", "tolerance": "1", "error": "1", "estimated_error": "1",
+         "wall_time": "s", "doStep_calls": "1", "rollbacks": "1", "communication_steps": "1",
+         "status": None, "taylor": "1"}
+COLUMNS = tuple(UNITS)
 
 
-def _row(o: Outcome) -> list:
+def table_row(o: Outcome, metric: str) -> dict:
+    """A run's row of accuracy.csv (and of AccuracyResult.to_pandas): column -> value; an error
+    that is no number ("unstable", "events differ": the figure or the reason is in the status)
+    is that word, an estimate that is none is empty."""
     s = o.setting
-    # no number for these: the figure or the reason is in the status
     error = "unstable" if o.unstable else "events differ" if o.events_differ else o.error
     estimate = o.extra.get("estimated_error")  # cosim.estimate: empty when there is none
-    return [s.algorithm, s.extrapolation, s.step, s.fmu_tolerance, s.tolerance, error,
-            "" if estimate is None else estimate, o.wall_seconds, o.do_steps, o.rollbacks, o.communication_steps, o.status]
+    return dict(zip(COLUMNS, [metric, s.algorithm, s.extrapolation, s.step, s.fmu_tolerance,
+                              s.tolerance, error, "" if estimate is None else estimate,
+                              o.wall_seconds, o.do_steps, o.rollbacks, o.communication_steps,
+                              o.status, s.taylor]))
 
 
-def write_table_csv(path: Path, outcomes: list[Outcome], metric: str) -> None:
-    """accuracy.csv, written through crankfmu.outputs.atomic_write."""
+def write_table_csv(path: Path, outcomes: list[Outcome], metric) -> Path:
+    """accuracy.csv and its sidecar accuracy.json (the metric, the units of the columns),
+    written through crankfmu.outputs.atomic_write; returns the sidecar's path."""
+    import json
+
     from ...outputs import atomic_write
 
     def write(f) -> None:
         w = csv.writer(f)
-        w.writerow(["metric"] + list(COLUMNS))
+        w.writerow(COLUMNS)
         for o in outcomes:
-            w.writerow([metric] + _row(o))
+            w.writerow(table_row(o, metric.name).values())
     atomic_write(path, write)
+    sidecar = Path(path).with_suffix(".json")
+    text = json.dumps({"csv": Path(path).name, "metric": metric.name,
+                       "metric_description": metric.describe(), "units": UNITS},
+                      indent=2) + "\n"
+    atomic_write(sidecar, lambda f: f.write(text))
+    return sidecar
 
 
-TABLE_HEAD = (f"{'algorithm':<13} {'ex':>2} {'step [s]':>9} {'fmu tol':>7} {'tol':>7} "
+TABLE_HEAD = (f"{'algorithm':<13} {'ex':>3} {'step [s]':>9} {'fmu tol':>7} {'tol':>7} "
               f"{'error [1]':>10} {'estimate':>9} {'wall [s]':>8} {'doSteps':>8} {'rollb.':>6}  status")
 
 
@@ -44,9 +62,15 @@ def format_outcome(o: Outcome) -> str:
         else f"{o.error:>10.3e}"
     est = o.extra.get("estimated_error")
     est = f"{est:>9.2e}" if est is not None else f"{'-':>9}"
-    return (f"{s.algorithm:<13} {s.extrapolation:>2} {s.step:>9.3g} "
+    return (f"{s.algorithm:<13} {_short(s):>3} {s.step:>9.3g} "
             f"{s.fmu_tolerance:>7.0e} {s.tolerance:>7.0e} {error} {est} "
             f"{o.wall_seconds:>8.3f} {o.do_steps:>8d} {o.rollbacks:>6d}  {status}")
+
+
+def _short(s) -> str:
+    """The coupling in a table column: the extrapolation order, or t<q> for a Taylor
+    coupling."""
+    return f"t{s.taylor}" if s.taylor else str(s.extrapolation)
 
 
 def format_table(outcomes: list[Outcome]) -> str:
@@ -65,44 +89,48 @@ def format_events(outcomes: list[Outcome]) -> str:
         s = o.setting
         figures = ", ".join(f"{k} {v:.2e}" for k, v in o.extra["events"].items()
                             if k in labels)
-        lines.append(f"  {s.algorithm} x{s.extrapolation} h {s.step:g}: {figures}")
+        lines.append(f"  {s.algorithm} {s.coupling} h {s.step:g}: {figures}")
     return "\n".join(lines)
 
 
 def format_orders(orders: dict) -> str:
     lines = ["observed order (slope of log error over log step; for a variable-step master over "
              "log tolerance):"]
-    for (alg, ex, ft), (order, used, knob) in orders.items():
+    for (alg, coupling, ft), (order, used, knob) in orders.items():
         text = f"{order:.2f}" if math.isfinite(order) else "n/a"
-        lines.append(f"  {alg:<13} extrapolation {ex}  fmu tol {ft:.0e}: {text} "
+        lines.append(f"  {alg:<13} {coupling:<15} fmu tol {ft:.0e}: {text} "
                      f"(vs {knob}, {used} points above the floor)")
     return "\n".join(lines)
+
+
+# line style and marker per coupling (Setting.coupling)
+COUPLING_STYLES = {"extrapolation 0": ("-", "o"), "extrapolation 1": ("--", "s"),
+                   "extrapolation 2": (":", "^"), "taylor 1": ("-.", "v"),
+                   "taylor 2": ("-.", "D"), "taylor 3": ("-.", "P"), "taylor 4": ("-.", "X")}
 
 
 def plot_work_precision(path: Path, outcomes: list[Outcome], metric_text: str,
                         target: float | None, title: str) -> None:
     """Error against wall time (left) and against doStep calls (right), log-log, one line per
-    master / extrapolation / FMU tolerance."""
+    master / coupling (extrapolation or Taylor order) / FMU tolerance."""
     from ...cosim.results import PALETTE, new_figure, save_figure
 
     groups: dict[tuple, list[Outcome]] = {}
     for o in outcomes:
         if o.ok and o.error > 0 and o.wall_seconds > 0:
             s = o.setting
-            groups.setdefault((s.algorithm, s.extrapolation, s.fmu_tolerance), []).append(o)
+            groups.setdefault((s.algorithm, s.coupling, s.fmu_tolerance), []).append(o)
     several_ft = len({k[2] for k in groups}) > 1
     fig = new_figure(figsize=(12, 5.5))
     axes = fig.subplots(1, 2, sharey=True)
-    # colour per master, line style and marker per extrapolation order
+    # colour per master, line style and marker per coupling
     masters = sorted({k[0] for k in groups})
     colours = {m: PALETTE[i % len(PALETTE)] for i, m in enumerate(masters)}
-    styles = {0: ("-", "o"), 1: ("--", "s"), 2: (":", "^")}
     for key, group in sorted(groups.items()):
         # along the knob (coarse to fine), so timing noise shows as noise, not as a new order
         group.sort(key=lambda o: -o.knob_value)
-        label = f"{key[0]}, extrapolation {key[1]}" + (f", fmu tol {key[2]:.0e}" if several_ft
-                                                       else "")
-        ls, marker = styles.get(key[1], ("-.", "D"))
+        label = f"{key[0]}, {key[1]}" + (f", fmu tol {key[2]:.0e}" if several_ft else "")
+        ls, marker = COUPLING_STYLES.get(key[1], ("-.", "D"))
         style = dict(color=colours[key[0]], ls=ls, marker=marker, lw=1.2, ms=5, label=label)
         axes[0].loglog([o.wall_seconds for o in group], [o.error for o in group], **style)
         axes[1].loglog([o.do_steps for o in group], [o.error for o in group], **style)
@@ -120,7 +148,7 @@ def plot_work_precision(path: Path, outcomes: list[Outcome], metric_text: str,
 
 
 def plot_estimates(path: Path, outcomes: list[Outcome], title: str) -> None:
-    """Estimated against true error, log-log, one marker per master and extrapolation, with the
+    """Estimated against true error, log-log, one marker per master and coupling, with the
     diagonal and the band of a factor 3 either side."""
     from ...cosim.results import PALETTE, new_figure, save_figure
 
@@ -130,12 +158,11 @@ def plot_estimates(path: Path, outcomes: list[Outcome], title: str) -> None:
     ax = fig.subplots()
     masters = sorted({o.setting.algorithm for o, _ in points})
     colours = {m: PALETTE[i % len(PALETTE)] for i, m in enumerate(masters)}
-    markers = {0: "o", 1: "s", 2: "^"}
     seen = set()
     for o, e in points:
-        key = (o.setting.algorithm, o.setting.extrapolation)
-        ax.loglog(o.error, e, ls="", marker=markers.get(key[1], "D"), color=colours[key[0]],
-                  label=None if key in seen else f"{key[0]}, extrapolation {key[1]}")
+        key = (o.setting.algorithm, o.setting.coupling)
+        ax.loglog(o.error, e, ls="", marker=COUPLING_STYLES.get(key[1], ("", "D"))[1],
+                  color=colours[key[0]], label=None if key in seen else f"{key[0]}, {key[1]}")
         seen.add(key)
     if points:
         values = [v for o, e in points for v in (o.error, e)]

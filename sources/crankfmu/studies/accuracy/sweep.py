@@ -1,9 +1,9 @@
 """The accuracy sweep: master algorithm x extrapolation x communication step (x FMU tolerance),
 each run compared with the monolithic reference (computed once, cached in the output folder).
 
-Fixed-step masters are swept over the communication step; a variable-step master (the one named
-`adaptive`, or any master class with `variable_step = True`) is swept over its tolerance instead,
-with the scene's step as its initial step.
+Fixed-step masters are swept over the communication step; a variable-step master
+(crankfmu.masters.traits: knob "tolerance") is swept over its tolerance instead, with the scene's
+step as its initial step; a monolithic master (knob None) runs once, at the scene's step.
 
 Each run's outcome is computed (and `report`ed, e.g. printed) as the run finishes, and kept as
 runs/<label>.outcome.json beside its CSV with a key of everything it depends on (physics,
@@ -28,8 +28,9 @@ from pathlib import Path
 import numpy as np
 
 from ...cosim.results import versions
+from ...masters import traits
 from ...outputs import atomic_write
-from ...reference import record_times, solve_reference, write_reference
+from ...monolithic import record_times, solve_reference, write_reference
 from ...cosim.metrics import Metric, MetricError, ReferenceSamples, observed_order
 
 FLOOR_FACTOR = 10.0  # errors below 10 x the FMUs' tolerance are not coupling errors
@@ -44,11 +45,18 @@ class Setting:
     step: float           # s, communication step (initial step of a variable-step master)
     fmu_tolerance: float
     tolerance: float      # the iterative/adaptive masters' own tolerance
+    taylor: int = 0       # a Taylor coupling's order ([master].taylor; then extrapolation 0)
 
     @property
     def label(self) -> str:
-        return (f"{self.algorithm}_x{self.extrapolation}_h{self.step:g}_ft{self.fmu_tolerance:g}"
+        coupling = f"_t{self.taylor}" if self.taylor else f"_x{self.extrapolation}"
+        return (f"{self.algorithm}{coupling}_h{self.step:g}_ft{self.fmu_tolerance:g}"
                 f"_tol{self.tolerance:g}")
+
+    @property
+    def coupling(self) -> str:
+        """How the inputs over a step are made: "extrapolation p" or "taylor q"."""
+        return f"taylor {self.taylor}" if self.taylor else f"extrapolation {self.extrapolation}"
 
 
 @dataclass
@@ -77,7 +85,8 @@ class Outcome:
 
     def to_json(self) -> dict:
         s = self.setting
-        return {"setting": [s.algorithm, s.extrapolation, s.step, s.fmu_tolerance, s.tolerance],
+        return {"setting": [s.algorithm, s.extrapolation, s.step, s.fmu_tolerance, s.tolerance,
+                            s.taylor],
                 "knob": self.knob, "error": self.error if math.isfinite(self.error) else None,
                 "wall_seconds": self.wall_seconds, "do_steps": self.do_steps,
                 "rollbacks": self.rollbacks, "communication_steps": self.communication_steps,
@@ -96,35 +105,28 @@ class Outcome:
         return self.setting.step if self.knob == "step" else self.setting.tolerance
 
 
-def is_variable_step(algorithm: str) -> bool:
-    from ...masters import MASTERS
-    cls = MASTERS.get(algorithm)
-    return algorithm == "adaptive" or bool(getattr(cls, "variable_step", False))
-
-
-def is_monolithic(algorithm: str) -> bool:
-    """A master that integrates the FMUs' Model Exchange interfaces as one ODE (model-exchange):
-    it has no communication step or extrapolation to sweep, so the sweep runs it once, at the
-    scene's step (its record grid), as the row the co-simulation masters are set against."""
-    from ...fmu.instance3 import CO_SIMULATION
-    from ...system.wiring import master_interface
-    return master_interface(algorithm) != CO_SIMULATION
-
-
 def settings_for(scene, algorithms, extrapolations, steps, fmu_tolerances,
-                 tolerances) -> list[Setting]:
+                 tolerances, taylors=()) -> list[Setting]:
+    """The grid: a monolithic master once, at the scene's step (its record grid: the row the
+    co-simulation masters are set against); for every other master each coupling (each
+    extrapolation, then each Taylor order if the master declares the option) x FMU tolerance x
+    tolerance (a variable-step master) or step (a fixed-step one)."""
+    from ...masters import MASTERS
     out = []
     for alg in algorithms:
-        if is_monolithic(alg):
+        if traits(alg).monolithic:
             out.append(Setting(alg, 0, scene.master.step, fmu_tolerances[0],
                                scene.master.tolerance))
             continue
-        for ex in extrapolations:
+        declared = {o.name for o in getattr(MASTERS.get(alg), "options", ())}
+        couplings = [(ex, 0) for ex in extrapolations] + \
+            [(0, q) for q in taylors if "taylor" in declared]
+        for ex, q in couplings:
             for ft in fmu_tolerances:
-                if is_variable_step(alg):
-                    out += [Setting(alg, ex, scene.master.step, ft, tol) for tol in tolerances]
+                if traits(alg).variable_step:
+                    out += [Setting(alg, ex, scene.master.step, ft, tol, q) for tol in tolerances]
                 else:
-                    out += [Setting(alg, ex, h, ft, scene.master.tolerance) for h in steps]
+                    out += [Setting(alg, ex, h, ft, scene.master.tolerance, q) for h in steps]
     return out
 
 
@@ -214,12 +216,14 @@ def trial_scene(scene, setting: Setting):
     m = trial.master
     m.algorithm, m.extrapolation, m.step = setting.algorithm, setting.extrapolation, setting.step
     m.fmu_tolerance, m.tolerance = setting.fmu_tolerance, setting.tolerance
+    if setting.taylor:
+        m.taylor = setting.taylor
     return trial
 
 
 def run_one(scene, setting: Setting, metric: Metric, ref: ReferenceSamples, fmu_dir,
             runs_dir: Path, executor=None) -> Outcome:
-    """One setting, run on `executor` (default: a pool of one worker process)."""
+    """One setting, run on `executor` (default: in this process)."""
     return run_settings(scene, [setting], metric, ref, fmu_dir, runs_dir, executor,
                         progress=False)[0]
 
@@ -227,12 +231,12 @@ def run_one(scene, setting: Setting, metric: Metric, ref: ReferenceSamples, fmu_
 def run_settings(scene, settings: list[Setting], metric: Metric, ref: ReferenceSamples, fmu_dir,
                  runs_dir: Path, executor=None, progress=False, label: str = "runs",
                  report=None, resume_key: str | None = None) -> list[Outcome]:
-    """Every setting as one run on `executor` (default: a pool of one worker process, runs one
-    after another); this process writes the runs' CSVs, sidecars and outcomes into runs_dir
+    """Every setting as one run on `executor` (default: in this process, one after another);
+    this process writes the runs' CSVs, sidecars and outcomes into runs_dir
     and calls report(outcome) as each run finishes. With `resume_key`, settings whose outcome
     file in runs_dir carries the same key are taken from there, not run again. The outcomes
     do not depend on the executor (only wall times do)."""
-    from ..executor import LocalPoolExecutor, RunTask
+    from ..executor import RunTask, make_executor
 
     outcomes: list[Outcome | None] = [None] * len(settings)
     if resume_key is not None:
@@ -245,7 +249,7 @@ def run_settings(scene, settings: list[Setting], metric: Metric, ref: ReferenceS
     if not tasks:
         return outcomes
     own = executor is None
-    executor = executor or LocalPoolExecutor(1)
+    executor = executor or make_executor(1)
 
     def done(output) -> None:
         k = output.key
@@ -311,7 +315,7 @@ def _outcome(setting: Setting, output, task, metric: Metric, ref: ReferenceSampl
     from ...cosim.runner import RunError
     from ..executor import write_run_files
 
-    outcome = Outcome(setting, "tolerance" if is_variable_step(setting.algorithm) else "step")
+    outcome = Outcome(setting, traits(setting.algorithm).knob or "step")
     csv = runs_dir / f"{setting.label}.csv"
     fmu_paths = {c: paths.get(d) for c, (d, _) in task.fmus.items()}
     if output.sidecar:  # the run got as far as writing results (completed or stopped early)
@@ -358,16 +362,17 @@ def _counts(statistics: dict) -> tuple[int, int]:
 
 # -- summaries -----------------------------------------------------------------------------------
 def orders(outcomes: list[Outcome], floor_factor: float = FLOOR_FACTOR) -> dict:
-    """Observed order per (algorithm, extrapolation, fmu_tolerance): slope of log error over log
-    step (log tolerance for a variable-step master) over the errors above floor_factor x the FMU
-    tolerance. Values: (order, points used, knob)."""
+    """Observed order per (algorithm, coupling, fmu_tolerance) (coupling: Setting.coupling,
+    "extrapolation p" or "taylor q"): slope of log error over log step (log tolerance for a
+    variable-step master) over the errors above floor_factor x the FMU tolerance. Values:
+    (order, points used, knob)."""
     groups: dict[tuple, list[Outcome]] = {}
     for o in outcomes:
         s = o.setting
-        groups.setdefault((s.algorithm, s.extrapolation, s.fmu_tolerance), []).append(o)
+        groups.setdefault((s.algorithm, s.coupling, s.fmu_tolerance), []).append(o)
     result = {}
     for key, group in groups.items():
-        if is_monolithic(key[0]):  # one run: no order to observe
+        if traits(key[0]).monolithic:  # one run: no order to observe
             continue
         ok = [o for o in group if o.ok]
         order, used = observed_order([o.knob_value for o in ok], [o.error for o in ok],
@@ -393,4 +398,4 @@ def _co_simulations_meeting(outcomes: list[Outcome], target: float) -> list[Outc
     """The co-simulation runs meeting the target (the monolithic row is what they are set
     against, not a setting to choose)."""
     return [o for o in outcomes if o.ok and o.error <= target
-            and not is_monolithic(o.setting.algorithm)]
+            and not traits(o.setting.algorithm).monolithic]

@@ -343,7 +343,7 @@ def mechanism_from_dict(data: dict, source: str = "<memory>") -> Mechanism:
                 raise MechanismError(source, f"{key}.type", f"{kind!r} is not a joint type",
                                      ", ".join(JOINT_TYPES) + ' (or free = ["rx", "tx", ...])')
             if axis2 is not None and kind != "U":
-                raise MechanismError(source, f"{key}.axis2", f"is only used by U joints",
+                raise MechanismError(source, f"{key}.axis2", "is only used by U joints",
                                      "remove it or use type U")
             freedoms = _freedoms_of_type(source, key, kind, axis, axis2)
         else:
