@@ -33,7 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # -- the FMUs -----------------------------------------------------------------------------------
 @pytest.mark.parametrize("model", list(FMU_MODELS))
 def test_every_model_has_both_interfaces_and_its_states(fmi3_dir, model):
-    """fmpy validate (build_all3 raised otherwise), ModelExchange and CoSimulation in one file,
+    """ModelExchange and CoSimulation in one file (fmpy validate: tests/test_fmu_build.py),
     the states those of the default effects and as many event indicators as the model's
     event_slots."""
     md = read_model_description(str(fmi3_dir / f"{model}.fmu"))
