@@ -64,8 +64,10 @@ def test_the_table_covers_every_shipped_scene():
 # conventional_press) driving the hammer (clutch_hammer) and the mill stand (clutch_mill_stand);
 # the rocker impact (mo100_impact)); the one master the scenes use (Gauss-Seidel); every event
 # type (contact blows, brake slip and lock, none). Left out are scenes that repeat one of these
-# with other parameters: hammer_bearings (hammer, recording the bearing load), mill_stand_p2p3 and
-# mill_stand_p4 (other mill stand parameter sets), planetary_engagement (the other brake locks).
+# with other parameters or effects: hammer_bearings (the hammer with its elastic support on: the
+# same model, master and blows), mill_stand_p2p3 and mill_stand_p4 (the mill stand's other joint
+# variants), planetary_engagement (the same brakes, the ring's locking instead of the carrier's).
+# Measured (-n 0): 10.3 s of CPU for these 9 tests, 15.7 s for all 13.
 QUICK = ["clutch_hammer", "clutch_mill_stand", "conventional_press", "hammer", "mill_stand",
          "mo100_impact", "planetary_stopping", "servo_press", "servo_press_speed_loop"]
 
