@@ -368,7 +368,11 @@ STATE_CASES = {  # model: (start values, step [s], steps before the save, steps 
     # the input's ramp (companion input) moves on in each step, and is in the state
     "PlanetaryClutchDrive": (START["PlanetaryClutchDrive"], 2e-3, 40, 60),  # slip, then lock
     "RockerImpact": (MO100, 1e-5, 10, 40),  # saved mid-impact, contact ends after it
-    "CrankRockerHammer": (START["CrankRockerHammer"], 2e-3, 70, 60),  # blows before and after
+    # the first blow in step 69; saved after it, in the support's ringing (kHz, the costly part:
+    # 25-35 ms of CPU a step); 10 steps of ringing after the restore (60 under
+    # CRANKFMU_FULL_TESTS=1: no further blow comes in them, so the 10 show what the 60 show: a
+    # state that was not restored bit for bit differs from the first step on)
+    "CrankRockerHammer": (START["CrankRockerHammer"], 2e-3, 70, quick_or_full(10, 60)),
     "MillStandDrive": (START["MillStandDrive"], 1e-2, 10, 20),
     "Rotor": (START["Rotor"], 1e-3, 5, 10),
     "ShaftRotor": (START["ShaftRotor"], 1e-3, 5, 10),
@@ -385,8 +389,8 @@ def _state_runs(mode: str, cases: dict) -> dict:
 def test_fmu_state_serialized_and_restored_in_a_new_process_continues_bit_identically(
         fmu_dir, fmi3_dir, tmp_path):
     """Every model, Co-Simulation, FMI 2.0 and FMI 3.0: a process steps the FMU, saves and
-    serializes its state (mid-impact for the rocker, mid-slip for the clutch, between blows for
-    the hammer) and steps on; a new process instantiates it, deserializes and restores that
+    serializes its state (mid-impact for the rocker, mid-slip for the clutch, in the support's
+    ringing after the first blow for the hammer) and steps on; a new process instantiates it, deserializes and restores that
     state and steps on: the same outputs, bit for bit (states, modes and the integrator's step
     size are in the state). One process saves every case, one restores them."""
     cases = {f"{model} (FMI {version}.0)": [
