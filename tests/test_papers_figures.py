@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 
 from crankfmu.cli import main
-from crankfmu.system.load import load_scene
 from crankfmu.studies import base_link, papers
 from tests.support import papers_data as data
 
