@@ -4,8 +4,10 @@ full.py: fewer cases, shorter spans, a seeded sample) run on its full set instea
 
     python scripts/full_checks.py [PYTEST ARGS]
 
-Without arguments it runs every test file that has such a subset; with arguments, what they
-name (e.g. `tests/test_fmi3.py -k model_exchange_matches`). Takes several minutes.
+It runs every test file that has such a subset, or the tests the arguments name (e.g.
+`tests/test_fmi3.py -k model_exchange_matches`); arguments that name no test (`-q`, `-k x`)
+go to pytest with the files. The whole suite on its full sets: `CRANKFMU_FULL_TESTS=1 python -m
+pytest`. Times: docs/testing.md.
 """
 from __future__ import annotations
 
@@ -22,8 +24,12 @@ def files_with_subsets() -> list[str]:
                   if "tests.support.full import" in p.read_text())
 
 
+def names_tests(arg: str) -> bool:
+    return arg.startswith("tests") or arg.endswith(".py") or "::" in arg
+
+
 def main(argv: list[str]) -> int:
-    args = argv or files_with_subsets()
+    args = argv if any(map(names_tests, argv)) else [*argv, *files_with_subsets()]
     env = {**os.environ, "CRANKFMU_FULL_TESTS": "1"}
     return subprocess.run([sys.executable, "-m", "pytest", *args], cwd=ROOT, env=env).returncode
 
