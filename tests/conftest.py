@@ -11,9 +11,17 @@ SCENARIOS = ROOT / "scenarios"
 
 def pytest_configure(config) -> None:
     """The FMUs the tests load unpack into a cache of this test run (crankfmu.fmu.archive), not
-    the user's; the processes the tests start inherit it (xdist's workers: the controller's)."""
+    the user's; the processes the tests start inherit it (xdist's workers: the controller's).
+
+    OpenBLAS runs on one thread (unless OPENBLAS_NUM_THREADS says otherwise), set before numpy
+    loads it, for this process and every process the tests start: the tests' matrices are a
+    few rows (a Rotor's exact step, the oscillator's exact solution), and on a busy machine
+    OpenBLAS's second thread made a 5 x 5 expm take 8 ms of CPU instead of 0.015 ms (waiting
+    for a thread the scheduler had not run; test_masters.py: 8.4 s of CPU, 1.4 s on one)."""
     import os
     import tempfile
+
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     if "CRANKFMU_CACHE_DIR" not in os.environ:
         os.environ["CRANKFMU_CACHE_DIR"] = config._crankfmu_cache = tempfile.mkdtemp(
             prefix="crankfmu-test-fmus-")
@@ -21,8 +29,10 @@ def pytest_configure(config) -> None:
 
 def pytest_unconfigure(config) -> None:
     import shutil
-    if getattr(config, "_crankfmu_cache", None):
-        shutil.rmtree(config._crankfmu_cache, ignore_errors=True)
+    for folder in (getattr(config, "_crankfmu_cache", None),
+                   getattr(config, "_crankfmu_catalog", None)):
+        if folder:
+            shutil.rmtree(folder, ignore_errors=True)
 
 
 def pytest_sessionstart(session) -> None:
@@ -30,40 +40,118 @@ def pytest_sessionstart(session) -> None:
     per worker), the controller brings the repository's fmus/ up to date before the workers
     start. Scenes run without --fmus build their FMUs there on first use: two workers meeting a
     missing FMU at once would both build it (each renames its own whole file over the target,
-    so readers are safe, but the work is done twice). Serially nothing changes: the first test
-    that needs an FMU builds it."""
+    so readers are safe, but the work is done twice). It also builds the session's catalog
+    (fmu_dir, fmi3_dir) once for every worker (each worker built its own: 4 s of CPU each),
+    without fmpy validate: that is tests/test_fmu_build.py's, per FMU, on the workers (it is
+    1.4 of the build's 4.0 s of CPU, measured 2026-11-26, and here the workers wait for it).
+    Serially nothing changes: the first test that needs an FMU builds it."""
     config = session.config
     if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
         return
-    from crankfmu.fmu.build import build_fmu, rebuild_reason
+    import contextlib
+    import io
+    import tempfile
+
+    from crankfmu.fmu.build import build_all, build_fmu, rebuild_reason
+    from crankfmu.fmu.build_fmi3 import build_all3
     from crankfmu.models.catalog import FMU_MODELS
 
     for model in FMU_MODELS:
         if rebuild_reason(ROOT / "fmus" / f"{model}.fmu", model) is not None:  # as resolve_fmu
             build_fmu(model, ROOT / "fmus")
+    config._crankfmu_catalog = tempfile.mkdtemp(prefix="crankfmu-test-catalog-")
+    said = io.StringIO()  # a line per FMU, shown only if the build or a check fails
+    try:
+        with contextlib.redirect_stdout(said):
+            build_all(Path(config._crankfmu_catalog), check=False)
+            build_all3(Path(config._crankfmu_catalog), check=False)
+    except BaseException:
+        print(said.getvalue())
+        raise
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_configure_node(node) -> None:
+    """pytest-xdist, in the controller: each worker gets the folder of the session's catalog."""
+    node.workerinput["crankfmu_catalog"] = getattr(node.config, "_crankfmu_catalog", None)
+
+
+def _controller_catalog(config) -> Path | None:
+    """The controller's catalog (pytest_sessionstart) in an xdist worker, else None."""
+    built = getattr(config, "workerinput", {}).get("crankfmu_catalog")
+    return Path(built) if built else None
 
 
 @pytest.fixture(scope="session")
-def fmu_dir(tmp_path_factory) -> Path:
-    """Every FMU of the catalog, built once for the session and checked with fmpy validate
-    (2 s; the test modules used to build their own, 17 builds of up to 9 FMUs). Tests only read
-    these files: a test that needs other builds makes them in its own folder."""
+def fmu_dir(request, tmp_path_factory) -> Path:
+    """Every FMU of the catalog, built once for the session (the test modules used to build
+    their own, 17 builds of up to 9 FMUs): the controller's with pytest-xdist, else built here.
+    fmpy validate checks them in tests/test_fmu_build.py. Tests only read these files: a test
+    that needs other builds makes them in its own folder."""
     from crankfmu.fmu.build import build_all
 
+    built = _controller_catalog(request.config)
+    if built:
+        return built
     dest = tmp_path_factory.mktemp("fmus")
-    build_all(dest)
+    build_all(dest, check=False)
     return dest
 
 
 @pytest.fixture(scope="session")
-def fmi3_dir(tmp_path_factory) -> Path:
+def fmi3_dir(request, tmp_path_factory) -> Path:
     """Every catalog model's FMI 3.0 FMU (Co-Simulation and Model Exchange, default effects),
-    built once for the session and checked with fmpy validate."""
-    from crankfmu.fmu.build_fmi3 import build_all3
+    built once for the session (as fmu_dir; fmpy validate in tests/test_fmu_build.py)."""
+    from crankfmu.fmu.build_fmi3 import FMI3_DIR, build_all3
 
+    built = _controller_catalog(request.config)
+    if built:
+        return built / FMI3_DIR
     dest = tmp_path_factory.mktemp("fmus")
-    build_all3(dest)
-    return dest / "fmi3"
+    build_all3(dest, check=False)
+    return dest / FMI3_DIR
+
+
+# -- pytest-xdist: which worker runs what, and in which order ------------------------------------
+# Files that share what a support module computes once run on one worker, one after the other.
+SHARED = {"tests/test_papers_figures.py": "papers",   # tests/support/papers_data.py
+          "tests/test_papers_claims.py": "papers"}
+# The longest units first (a file, or the files of a SHARED name): the short ones then fill the
+# end, and the two workers finish together. Seconds of CPU per unit in `python -m pytest`
+# (2026-11-26, a per-test CPU plugin): fmi3 23, sweep 20, papers 16, large_steps 9, runtime 8,
+# fmu_build 8, runtime_scenes 7, press_physics 7, importer_c 6; every other file under 5 s.
+LONGEST_FIRST = ["tests/test_fmi3.py", "tests/test_sweep.py", "papers", "tests/test_large_steps.py",
+                 "tests/test_runtime.py", "tests/test_fmu_build.py", "tests/test_runtime_scenes.py",
+                 "tests/test_press_physics.py", "tests/test_importer_c.py"]
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """--dist loadfile (pyproject.toml) with the files of a SHARED name as one unit, and the
+    units in the order of LONGEST_FIRST, then by number of tests (xdist's own order). (The
+    xdist_group marks of --dist loadgroup are lost with pytest 9.2 and pytest-xdist 3.8: the
+    worker renames item._nodeid, which pytest 9 no longer reads.)"""
+    if config.getvalue("dist") != "loadfile":
+        return None
+    from xdist.scheduler import LoadFileScheduling
+
+    class SharedFilesLongestFirst(LoadFileScheduling):
+        ordered = False
+
+        def _split_scope(self, nodeid: str) -> str:
+            file = super()._split_scope(nodeid)
+            return SHARED.get(file, file)
+
+        def _assign_work_unit(self, node) -> None:
+            if not self.ordered:  # the queue is complete before the first unit is assigned
+                rank = {unit: k for k, unit in enumerate(LONGEST_FIRST)}
+                self.workqueue = type(self.workqueue)(sorted(
+                    self.workqueue.items(),
+                    key=lambda unit: (rank.get(unit[0], len(rank)), -len(unit[1]))))
+                self.ordered = True
+            super()._assign_work_unit(node)
+
+    return SharedFilesLongestFirst(config, log)
 
 
 @pytest.fixture(scope="session")

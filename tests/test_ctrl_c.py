@@ -17,10 +17,16 @@ import signal
 
 from tests.conftest import ROOT
 from tests.support.fuzz.ctrl_c import campaign, rotor
+from tests.support.full import quick_or_full
 
 
-def test_ctrl_c_20_of_20_at_random_times(tmp_path, fmu_dir):
-    trials = campaign(20, 27, tmp_path, fmu_dir, ROOT)
+TRIALS = quick_or_full(6, 20)  # the first 6 of the seeded 20: each phase twice
+
+
+def test_ctrl_c_at_random_times_is_clean_every_time(tmp_path, fmu_dir):
+    """The first 6 trials of seed 27 (imports, run, shutdown, twice); all 20 of it:
+    `python scripts/full_checks.py tests/test_ctrl_c.py`."""
+    trials = campaign(TRIALS, 27, tmp_path, fmu_dir, ROOT)
     print("\n".join(f"{t['phase']:9} {t['delay']:.3f} s: status {t['status']}" for t in trials))
     assert [t for t in trials if not t["clean"]] == []
 

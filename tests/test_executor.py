@@ -1,5 +1,6 @@
 """`accuracy` and `compare` through the executor: a local pool of 2 gives the serial path's
-numbers and files exactly (wall times aside). The accuracy studies run without the error
+numbers and files exactly (wall times aside; on a Dask cluster: tests/test_sweep.py, beside
+the sweeps on the same cluster). The accuracy studies run without the error
 estimate's companion runs (estimate=False): they are more runs of the same kind, cost more than
 the runs compared (half the step), and the estimates are not compared here
 (tests/test_error_estimate.py checks them)."""
@@ -67,47 +68,6 @@ def test_compare_on_a_pool_equals_serial(fmu_dir, tmp_path):
     assert serial.text == parallel.text
     for name in ("compare.csv", "servo_press.csv", "with_flywheel.csv"):
         assert (tmp_path / "serial" / name).read_bytes() == (tmp_path / "pool" / name).read_bytes()
-
-
-def test_accuracy_and_compare_on_a_dask_cluster_equal_serial(fmu_dir, tmp_path):
-    """The same two studies on a LocalCluster of 2 worker processes (127.0.0.1): the numbers
-    and the run files equal the serial path's."""
-    distributed = __import__("pytest").importorskip("distributed")
-    from crankfmu.studies.accuracy import AccuracyOptions, run_accuracy
-    from crankfmu.studies.compare import compare_scenes
-    from crankfmu.cosim.runner import RunOptions
-    from crankfmu.studies.executor import DaskExecutor
-
-    def scene(stop):
-        s = load_scene(SCENARIOS / "servo_press.toml")
-        s.stop_time = stop
-        return s
-
-    def options(out, **kw):
-        return AccuracyOptions(out_dir=out, algorithms=["gauss-seidel"], extrapolations=[0, 1],
-                               steps=[2e-3, 1e-3], fmu_dir=fmu_dir, progress=False,
-                               estimate=False, **kw)
-    serial = run_accuracy(scene(0.1), options(tmp_path / "serial", jobs=1))
-    b = scene(0.7)
-    b.name = "with_flywheel"
-    b.components["motor"].parameters["J_flywheel"] = 0.1
-    run_opts = RunOptions(fmu_dir=fmu_dir, progress=False)
-    serial_cmp = compare_scenes(scene(0.7), copy.deepcopy(b), tmp_path / "cmp_serial", run_opts)
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  host="127.0.0.1", dashboard_address=None) as lc, \
-            distributed.Client(lc) as client:
-        dask = DaskExecutor(client=client)
-        on_dask = run_accuracy(scene(0.1), options(tmp_path / "dask", executor=dask))
-        dask_cmp = compare_scenes(scene(0.7), copy.deepcopy(b), tmp_path / "cmp_dask", run_opts,
-                                  dask)
-    for oa, ob in zip(serial.outcomes, on_dask.outcomes):
-        assert (oa.setting, oa.status, oa.error, oa.do_steps) == \
-            (ob.setting, ob.status, ob.error, ob.do_steps)
-        name = f"runs/{oa.setting.label}.csv"
-        assert (tmp_path / "serial" / name).read_bytes() == (tmp_path / "dask" / name).read_bytes()
-    assert serial_cmp.text == dask_cmp.text
-    assert (tmp_path / "cmp_serial" / "compare.csv").read_bytes() == \
-        (tmp_path / "cmp_dask" / "compare.csv").read_bytes()
 
 
 def pid_and_worker_folder() -> tuple[int, str]:

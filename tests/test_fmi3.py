@@ -25,6 +25,7 @@ import pytest
 from fmpy import read_model_description, simulate_fmu
 
 from crankfmu.models.catalog import FMU_MODELS, physics_class
+from tests.support.full import quick_or_full
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -32,7 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # -- the FMUs -----------------------------------------------------------------------------------
 @pytest.mark.parametrize("model", list(FMU_MODELS))
 def test_every_model_has_both_interfaces_and_its_states(fmi3_dir, model):
-    """fmpy validate (build_all3 raised otherwise), ModelExchange and CoSimulation in one file,
+    """ModelExchange and CoSimulation in one file (fmpy validate: tests/test_fmu_build.py),
     the states those of the default effects and as many event indicators as the model's
     event_slots."""
     md = read_model_description(str(fmi3_dir / f"{model}.fmu"))
@@ -234,12 +235,17 @@ def _reference_and_run(name: str, stop_time: float | None = None, step: float | 
     return ref.values, run.values, run
 
 
+SERVO_STOP = quick_or_full(1.0, 3.0)  # s: the first 2.7 press cycles, or the scene's 3 s
+
+
 def test_servo_press_model_exchange_matches_the_reference():
-    """`crankfmu run scenarios/servo_press.toml --algorithm model-exchange` (rtol 1e-8, the
-    whole 3 s) against `crankfmu reference`: max |w - w_ref| / mean |w_ref| below 1e-6."""
-    ref, run, result = _reference_and_run("servo_press")
+    """`crankfmu run scenarios/servo_press.toml --algorithm model-exchange` (rtol 1e-8) against
+    `crankfmu reference`: max |w - w_ref| / mean |w_ref| below 1e-6. Over the first second
+    (start-up and 2.7 press cycles, their forging windows the state events); the whole 3 s:
+    `python scripts/full_checks.py tests/test_fmi3.py -k servo_press_model_exchange`."""
+    ref, run, result = _reference_and_run("servo_press", stop_time=SERVO_STOP)
     w, w_ref = run["press.w_crank"], ref["press.w_crank"]
-    assert len(w) == len(w_ref) == 3001
+    assert len(w) == len(w_ref) == round(SERVO_STOP / 1e-3) + 1
     error = float(np.max(np.abs(w - w_ref)) / np.mean(np.abs(w_ref)))
     assert error < 1e-6, error
     stats = result.metadata["master_statistics"]
@@ -337,7 +343,7 @@ def instance(path, start):
 
 mode, cases = sys.argv[1], json.loads(sys.argv[2])
 results = {}
-for model, (path, state_file, start, step, before, after) in cases.items():
+for case, (path, state_file, start, step, before, after) in cases.items():
     fmu, outputs, (get, _, serialize, deserialize) = instance(path, start)
     if mode == "save":
         for k in range(before):
@@ -350,7 +356,7 @@ for model, (path, state_file, start, step, before, after) in cases.items():
     for k in range(before, before + after):
         fmu.doStep(k * step, step)
         rows.append(get(outputs))
-    results[model] = rows
+    results[case] = rows
 print(json.dumps(results))
 '''
 
@@ -362,7 +368,11 @@ STATE_CASES = {  # model: (start values, step [s], steps before the save, steps 
     # the input's ramp (companion input) moves on in each step, and is in the state
     "PlanetaryClutchDrive": (START["PlanetaryClutchDrive"], 2e-3, 40, 60),  # slip, then lock
     "RockerImpact": (MO100, 1e-5, 10, 40),  # saved mid-impact, contact ends after it
-    "CrankRockerHammer": (START["CrankRockerHammer"], 2e-3, 70, 60),  # blows before and after
+    # the first blow in step 69; saved after it, in the support's ringing (kHz, the costly part:
+    # 25-35 ms of CPU a step); 10 steps of ringing after the restore (60 under
+    # CRANKFMU_FULL_TESTS=1: no further blow comes in them, so the 10 show what the 60 show: a
+    # state that was not restored bit for bit differs from the first step on)
+    "CrankRockerHammer": (START["CrankRockerHammer"], 2e-3, 70, quick_or_full(10, 60)),
     "MillStandDrive": (START["MillStandDrive"], 1e-2, 10, 20),
     "Rotor": (START["Rotor"], 1e-3, 5, 10),
     "ShaftRotor": (START["ShaftRotor"], 1e-3, 5, 10),
@@ -376,22 +386,22 @@ def _state_runs(mode: str, cases: dict) -> dict:
     return json.loads(done.stdout.splitlines()[-1])
 
 
-@pytest.mark.parametrize("version", [2, 3])
 def test_fmu_state_serialized_and_restored_in_a_new_process_continues_bit_identically(
-        fmu_dir, fmi3_dir, tmp_path, version):
+        fmu_dir, fmi3_dir, tmp_path):
     """Every model, Co-Simulation, FMI 2.0 and FMI 3.0: a process steps the FMU, saves and
-    serializes its state (mid-impact for the rocker, mid-slip for the clutch, between blows for
-    the hammer) and steps on; a new process instantiates it, deserializes and restores that
+    serializes its state (mid-impact for the rocker, mid-slip for the clutch, in the support's
+    ringing after the first blow for the hammer) and steps on; a new process instantiates it, deserializes and restores that
     state and steps on: the same outputs, bit for bit (states, modes and the integrator's step
-    size are in the state)."""
-    folder = fmu_dir if version == 2 else fmi3_dir
-    cases = {model: [str(folder / f"{model}.fmu"), str(tmp_path / f"{model}.state"),
-                     *STATE_CASES[model]] for model in FMU_MODELS}
+    size are in the state). One process saves every case, one restores them."""
+    cases = {f"{model} (FMI {version}.0)": [
+        str(folder / f"{model}.fmu"), str(tmp_path / f"{model}-{version}.state"),
+        *STATE_CASES[model]] for version, folder in ((2, fmu_dir), (3, fmi3_dir))
+        for model in FMU_MODELS}
     saved = _state_runs("save", cases)
     restored = _state_runs("restore", cases)
-    for model in FMU_MODELS:
-        assert restored[model] == saved[model], model
-        assert saved[model][0] != saved[model][-1], model  # the outputs move after the save
+    for case in cases:
+        assert restored[case] == saved[case], case
+        assert saved[case][0] != saved[case][-1], case  # the outputs move after the save
 
 
 FAILING_INIT3 = r'''

@@ -13,7 +13,6 @@ an independent solution; docs/papers.md lists them with the commands that draw t
 from __future__ import annotations
 
 import csv
-import functools
 import math
 from pathlib import Path
 
@@ -25,21 +24,17 @@ from crankfmu.system.load import load_scene
 from crankfmu.studies import base_link, papers
 from crankfmu.studies import press_analysis as pa
 from crankfmu.studies import rocker_analysis as ra
+from tests.support import papers_data as data
 
 ROOT = Path(__file__).resolve().parents[1]
 PRESS_SCENE = ROOT / "scenarios" / "servo_press.toml"
-IMPACT_SCENE = ROOT / "scenarios" / "mo100_impact.toml"
 CONVENTIONAL = ROOT / "scenarios" / "conventional_press.toml"
 MECHANISMS = ROOT / "scenarios" / "mechanisms"
 
 
 # -- seed 000, Fig. 4: the base link's mass ---------------------------------------------------
-MASSES = (0.0, 20.0, 80.0, 200.0, 400.0)
-
-
-@functools.lru_cache(maxsize=None)
-def mass_sweep():
-    return base_link.mass_sweep(load_scene(PRESS_SCENE), MASSES)
+# computed once with test_papers_figures.py (one worker runs both: tests/conftest.py, SHARED)
+MASSES, mass_sweep = data.MASSES, data.mass_sweep
 
 
 def test_base_link_first_approximation_against_simulation():
@@ -113,7 +108,7 @@ def test_eq28_both_conventions_against_an_independent_minimum():
 
     from crankfmu.studies.flywheel import eq28_conventions
 
-    press, motor, _, u0 = papers.press_models(load_scene(PRESS_SCENE))
+    press, motor, _, u0 = data.press_models()
     conv = eq28_conventions(press, motor, u0)
     phi = 2 * np.pi * np.arange(96) / 96
     J, J2O = papers.press_kinetic_inertia(press, phi)
@@ -135,8 +130,7 @@ def test_eq28_product_convention_is_closer_to_the_time_domain():
     sqrt(26) in either convention (flywheel_data): both within 0.5 % (the first approximation's
     neglected terms, tests/test_press_physics.py), and the product's J0 = mean of J is the
     closer at every flywheel (measured 0.06-0.13 % against 0.17-0.24 % for the paper's)."""
-    press, motor, _, u0 = papers.press_models(load_scene(PRESS_SCENE))
-    d = papers.flywheel_data(press, motor, u0)
+    d = data.press_data()[1]  # papers.flywheel_data of the scene's press and static motor
     product = np.interp(d["J_f"], d["grid"], d["ratio"])
     paper = np.interp(d["J_f"], d["grid"], d["ratio_paper"])
     err_product = np.abs(product / d["ratio_sim"] - 1)
@@ -146,9 +140,7 @@ def test_eq28_product_convention_is_closer_to_the_time_domain():
 
 
 # -- seed 004, Figs. 2-3 for the three bearings, curve 2 -----------------------------------------
-@functools.lru_cache(maxsize=None)
-def stiffness_runs():
-    return papers.impact_stiffness_data(IMPACT_SCENE)
+stiffness_runs = data.impact_stiffness_data
 
 
 def test_figs_2_3_three_stiffnesses_against_the_fmu():

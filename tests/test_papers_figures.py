@@ -6,15 +6,14 @@ stopping angles, mobility tables) are checked in tests/test_papers_claims.py.
 """
 from __future__ import annotations
 
-import functools
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from crankfmu.cli import main
-from crankfmu.system.load import load_scene
-from crankfmu.studies import papers
+from crankfmu.studies import base_link, papers
+from tests.support import papers_data as data
 
 ROOT = Path(__file__).resolve().parents[1]
 PRESS_SCENE = ROOT / "scenarios" / "servo_press.toml"
@@ -23,44 +22,24 @@ PLANETARY_SCENE = ROOT / "scenarios" / "planetary_engagement.toml"
 MECHANISMS = ROOT / "scenarios" / "mechanisms"
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
-
-# the real ones (the command tests patch the module)
-_DYNAMIC_ERROR_DATA, _FLYWHEEL_DATA = papers.dynamic_error_data, papers.flywheel_data
-_IMPACT_DATA = papers.impact_data
-
-
-@functools.lru_cache(maxsize=None)
-def press_data():
-    press, m_static, m_lag, u0 = papers.press_models(load_scene(PRESS_SCENE))
-    return (_DYNAMIC_ERROR_DATA(press, m_static, m_lag, u0),
-            _FLYWHEEL_DATA(press, m_static, u0))
-
-
-@functools.lru_cache(maxsize=None)
-def impact_data(k_n=None):
-    return _IMPACT_DATA(IMPACT_SCENE, k_n)
-
-
-_PLANETARY_DATA = papers.planetary_data   # the real one (the command test patches the module)
-
-
-@functools.lru_cache(maxsize=None)
-def planetary_data():
-    return _PLANETARY_DATA(PLANETARY_SCENE)
+# computed once with test_papers_claims.py (one worker runs both: tests/conftest.py, SHARED)
+press_data, impact_data, planetary_data = data.press_data, data.impact_data, data.planetary_data
 
 
 def assert_pngs(directory: Path, names) -> None:
     for name in names:
-        data = (directory / name).read_bytes()
-        assert data.startswith(PNG_MAGIC) and len(data) > 10_000, name
+        png = (directory / name).read_bytes()
+        assert png.startswith(PNG_MAGIC) and len(png) > 10_000, name
 
 
 # -- the commands (through the parser: --out DIR, --plot) --------------------------------------
 def test_analyze_press_writes_its_tables_and_figures(tmp_path, capsys, monkeypatch):
-    # the dynamic-error and flywheel curves from the cached data (the command's own computation
-    # is the same calls, on the same scene); the rest is computed by the command
+    # the dynamic-error and flywheel curves and the base link's masses from the cached data
+    # (the command's own computation is the same calls, on the same scene); the rest is
+    # computed by the command
     monkeypatch.setattr(papers, "dynamic_error_data", lambda *args: press_data()[0])
     monkeypatch.setattr(papers, "flywheel_data", lambda *args: press_data()[1])
+    monkeypatch.setattr(base_link, "mass_sweep", data.mass_sweep_at)
     out = tmp_path / "figs" / "press"   # created, parents too
     assert main(["analyze", "press", "--out", str(out), "--plot", "--masses", "20", "200",
                  "--scene", str(PRESS_SCENE)]) == 0
@@ -77,7 +56,8 @@ def test_analyze_press_writes_its_tables_and_figures(tmp_path, capsys, monkeypat
     assert (out / "press_flywheel_28.csv").read_text().count("\n") == 3
 
 
-def test_analyze_press_without_plot_writes_tables_only(tmp_path, capsys):
+def test_analyze_press_without_plot_writes_tables_only(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(base_link, "mass_sweep", data.mass_sweep_at)  # as above
     assert main(["-q", "analyze", "press", "--out", str(tmp_path), "--masses", "20",
                  "--scene", str(PRESS_SCENE)]) == 0
     assert sorted(p.name for p in tmp_path.iterdir()) == ["press_base_link_mass.csv",
