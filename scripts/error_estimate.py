@@ -97,6 +97,8 @@ def rows_for_scene(scene, out: Path, jobs: int):
     m = scene.master
     rows, adaptive_companions = [], []
     for alg in MASTERS:
+        if traits(alg).monolithic:
+            continue  # no coupling error: nothing to estimate
         for ex in (0, 1, 2):
             variable = traits(alg).variable_step
             if variable and ex == 0:
