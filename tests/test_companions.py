@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import SCENARIOS
-from tests.test_sweep import _session_processes, rotor_fmu_dir, spinner  # noqa: F401
+from tests.test_sweep import kill_9_mid_run, rotor_fmu_dir, spinner  # noqa: F401
 from crankfmu.cosim.companions import Companions
 from crankfmu.cosim.runner import RunOptions, run_companion, run_scene
 from crankfmu.cosim.target import search
@@ -98,37 +98,9 @@ def test_kill_9_of_a_run_ends_its_companion_worker(tmp_path, rotor_fmu_dir, star
     machine's bound): the worker ends when the pipe only its parent writes to closes
     (cosim/workers.py), as a sweep's workers do. Before, that worker (the standard library's
     pool, spawned) went on with its companion run and waited on its task queue for good."""
-    import os
-    import signal
-    import subprocess
-    import sys
     scene = spinner(tmp_path, stop=200.0)  # a run of seconds: killed mid-run
-    tmp = tmp_path / "tmp"
-    tmp.mkdir()
-    run = subprocess.Popen(
-        [sys.executable, "-m", "crankfmu", "run", str(scene), "--jobs", "2", "--fmus",
-         str(rotor_fmu_dir), "--out", str(tmp_path / "out"), "--no-progress"],
-        start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-        env={**os.environ, "TMPDIR": str(tmp), "CRANKFMU_START_METHOD": start_method})
-    sid = run.pid
-    try:
-        end = time.time() + 120
-        while not [p for p, c in _session_processes(sid)  # the worker
-                   if p != sid and "resource_tracker" not in c]:
-            assert time.time() < end and run.poll() is None, run.stderr.read().decode()[-2000:]
-            time.sleep(0.1)
-        time.sleep(1.0)  # both load their FMUs and run
-        os.kill(run.pid, signal.SIGKILL)
-        run.wait()
-        end = time.time() + 30
-        while _session_processes(sid) and time.time() < end:
-            time.sleep(0.1)
-        left = _session_processes(sid)
-    finally:
-        for pid, _ in _session_processes(sid):  # what the test started, by its id
-            try:
-                os.kill(pid, signal.SIGKILL)
-            except ProcessLookupError:  # ended meanwhile
-                pass
+    _, left, tmp = kill_9_mid_run(["run", str(scene), "--jobs", "2", "--fmus",
+                                   str(rotor_fmu_dir), "--out", str(tmp_path / "out"),
+                                   "--no-progress"], tmp_path, start_method, workers=1)
     assert left == [], left
     assert not [p.name for p in tmp.iterdir() if p.name.startswith("crankfmu-")]

@@ -240,29 +240,41 @@ def test_kill_9_of_a_sweep_leaves_no_process_and_no_temporary_folder(tmp_path, r
     workers see the pipe close at once; the bound is for a loaded machine). Forked workers too:
     each closes its copy of the pipe's write end (without that, the pipe stayed open and they
     waited for good)."""
+    scene = spinner(tmp_path, stop=200.0)  # runs of seconds: the sweep is killed mid-run
+    before, left, tmp = kill_9_mid_run(
+        ["sweep", str(scene), *(f"--vary={v}" for v in VARY), "--jobs", "2", "--fmus",
+         str(rotor_fmu_dir), "--out", str(tmp_path / "out"), "--no-progress"],
+        tmp_path, start_method, workers=2)
+    print(f"\nkilled the sweep; its session held {len(before)} processes: {before}")
+    assert left == [], left
+    assert not [p.name for p in tmp.iterdir() if p.name.startswith("crankfmu-")]
+
+
+def kill_9_mid_run(args: list[str], tmp_path: Path, start_method: str, workers: int):
+    """Start `crankfmu ARGS` in its own session (temporary folders in tmp_path/tmp, workers
+    started by `start_method`), wait until `workers` worker processes run, let them run 1 s,
+    kill -9 the crankfmu process and wait up to 30 s (a loaded machine's bound) for the session
+    to empty. Returns (the session's processes before the kill, those left, the temp folder)."""
     import subprocess
     import sys
-    scene = spinner(tmp_path, stop=200.0)  # runs of seconds: the sweep is killed mid-run
     tmp = tmp_path / "tmp"
     tmp.mkdir()
-    sweep_process = subprocess.Popen(
-        [sys.executable, "-m", "crankfmu", "sweep", str(scene), *(f"--vary={v}" for v in VARY),
-         "--jobs", "2", "--fmus", str(rotor_fmu_dir), "--out", str(tmp_path / "out"),
-         "--no-progress"], start_new_session=True, stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
+    process = subprocess.Popen(
+        [sys.executable, "-m", "crankfmu", *args], start_new_session=True,
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
         env={**os.environ, "TMPDIR": str(tmp), "CRANKFMU_START_METHOD": start_method})
-    sid = sweep_process.pid
+    sid = process.pid
     try:
         end = time.time() + 120
         while len([p for p, c in _session_processes(sid)  # the workers
-                   if p != sid and "resource_tracker" not in c]) < 2:
-            assert time.time() < end and sweep_process.poll() is None, \
-                sweep_process.stderr.read().decode()[-2000:]
+                   if p != sid and "resource_tracker" not in c]) < workers:
+            assert time.time() < end and process.poll() is None, \
+                process.stderr.read().decode()[-2000:]
             time.sleep(0.1)
         time.sleep(1.0)  # the workers load their FMUs and run
         before = _session_processes(sid)
-        os.kill(sweep_process.pid, signal.SIGKILL)
-        sweep_process.wait()
+        os.kill(process.pid, signal.SIGKILL)
+        process.wait()
         end = time.time() + 30
         while _session_processes(sid) and time.time() < end:
             time.sleep(0.1)
@@ -273,9 +285,7 @@ def test_kill_9_of_a_sweep_leaves_no_process_and_no_temporary_folder(tmp_path, r
                 os.kill(pid, signal.SIGKILL)
             except ProcessLookupError:  # ended meanwhile
                 pass
-    print(f"\nkilled the sweep; its session held {len(before)} processes: {before}")
-    assert left == [], left
-    assert not [p.name for p in tmp.iterdir() if p.name.startswith("crankfmu-")]
+    return before, left, tmp
 
 
 @pytest.fixture(scope="module")
