@@ -32,7 +32,7 @@ def register(sub) -> None:
                    help="skip the error estimate (its companion run at half the step costs "
                         "1.1-1.7 x the run: docs/error_estimate.md)")
     add_jobs_option(p, "the run and the companion runs of its error estimate and of "
-                       "--target's search (2 pays on runs of seconds with a free core)",
+                       "--target's search (2 pays with a free core)",
                     scheduler=False)
     p.set_defaults(func=run_command)
 
