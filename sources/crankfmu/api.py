@@ -210,7 +210,7 @@ def simulate(scene, *, stop_time=None, step=None, algorithm=None, parameters=Non
     fmus/ beside the scene's scenarios/ folder, else the package's build folder; stale or
     missing FMUs are built there, never into the working folder). `master_options`: the
     chosen master's own options (extrapolation=2, tolerance=1e-4, ...; see `prepare`).
-    `estimate`: run the companions of the error estimate (Result.estimated_error; 1.1-1.7 x
+    `estimate`: run the companions of the error estimate (Result.estimated_error; 1.2-1.9 x
     the run's cost). `target` (or the scene's [master].target): the global error wanted;
     master, extrapolation and step are chosen from the estimate (crankfmu.cosim.target);
     raises crankfmu.cosim.target.TargetNotMet saying why when no setting meets it. `jobs=2`:

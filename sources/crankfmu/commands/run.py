@@ -30,7 +30,7 @@ def register(sub) -> None:
                         "(default: the scene's [master].target, else no search)")
     p.add_argument("--no-estimate", action="store_true",
                    help="skip the error estimate (its companion run at half the step costs "
-                        "1.1-1.7 x the run: docs/error_estimate.md)")
+                        "1.2-1.9 x the run: docs/error_estimate.md)")
     add_jobs_option(p, "the run and the companion runs of its error estimate and of "
                        "--target's search (2 pays with a free core)",
                     scheduler=False)
