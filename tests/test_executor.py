@@ -157,16 +157,12 @@ def test_workers_of_a_closed_pool_leave_no_folder_and_not_the_parents(tmp_path, 
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="forked workers: Linux")
-def test_workers_are_forked_unless_an_fmu_call_failed_or_a_thread_runs(fmu_dir):
+def test_workers_are_forked_unless_an_fmu_call_failed_or_a_thread_runs(tmp_path, fmu_dir):
     """start_method: fork from a process that runs one thread, after a run too; spawn while
     another thread runs (a copy could inherit a lock that thread holds) and after an FMU call
     failed in the process (a pythonfmu binary can leave the interpreter that ran an exception
     inside it corrupt: a copy would inherit that). The failure is a doStep that fails as an
     FMU's does (fmpy's FMICallException), in the runner's stepping."""
-    import os
-    import subprocess
-
-    from tests.conftest import ROOT
     scene = str(SCENARIOS / "servo_press.toml")
     script = (
         "import threading, crankfmu\n"
@@ -191,8 +187,5 @@ def test_workers_are_forked_unless_an_fmu_call_failed_or_a_thread_runs(fmu_dir):
         "except Exception as err:\n"
         "    print(type(err).__name__)\n"
         "print(first, with_thread, after_run, start_method())\n")
-    env = {k: v for k, v in os.environ.items() if k != "CRANKFMU_START_METHOD"}
-    done = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True,
-                          text=True, timeout=120, env=env)
-    assert done.returncode == 0, done.stderr[-3000:]
+    done = run_pool_script(script, tmp_path, "")  # "": no start method chosen
     assert done.stdout.split()[-4:] == ["fork", "spawn", "fork", "spawn"], done.stdout
