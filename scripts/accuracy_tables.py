@@ -19,7 +19,6 @@ import argparse
 import math
 import shutil
 import sys
-import time
 from pathlib import Path
 
 from generated_page import write_generated  # scripts/, beside this file
@@ -51,15 +50,12 @@ def main(argv=None) -> int:
     sections = []
     for path in paths:
         scene = load_scene(path)
-        t0 = time.perf_counter()
         print(f"== {scene.name}", flush=True)
         steps = [f * scene.master.step for f in STEP_FACTORS]
         result = run_accuracy(scene, AccuracyOptions(out_dir=args.out / scene.name, steps=steps,
                                                      jobs=args.jobs, progress=False,
                                                      plot=scene.name in PLOTS))
-        wall = time.perf_counter() - t0
-        sections.append(section(scene, result, [cheapest(result.outcomes, t) for t in TARGETS],
-                                wall))
+        sections.append(section(scene, result, [cheapest(result.outcomes, t) for t in TARGETS]))
         print(sections[-1], flush=True)
         if scene.name in PLOTS:
             images = ROOT / "docs" / "img"
@@ -84,7 +80,7 @@ def run_wall(result) -> float:
     return sum(o.wall_seconds for o in result.outcomes if math.isfinite(o.wall_seconds))
 
 
-def section(scene, result, best, wall: float) -> str:
+def section(scene, result, best) -> str:
     lines = [f"#### {scene.name}",
              "",
              f"Metric: {result.metric.describe()}. {len(result.outcomes)} runs, their wall "
