@@ -108,11 +108,11 @@ def coupling_text(coupling: tuple[int, int]) -> str:
 def candidates(scene, taylor: int = 0) -> list[tuple[str, tuple[int, int]]]:
     """(algorithm, (extrapolation, taylor)) in the order tried (module docstring); `taylor`:
     the Taylor order the scene's FMUs offer, 0 for none."""
-    from ..masters import MASTERS
+    from ..masters import traits
     first = scene.master.algorithm
     found = []
     if taylor:
-        takes = "taylor" in {o.name for o in getattr(MASTERS.get(first), "options", ())}
+        takes = "taylor" in traits(first).options
         found.append((first if takes else "gauss-seidel", (0, taylor)))
     found += [(first, (2, 0)), ("gauss-seidel", (2, 0)), ("gauss-seidel", (1, 0))]
     return list(dict.fromkeys(found))

@@ -52,6 +52,7 @@ class Traits:
     variable_step: bool   # it chooses its steps (class attribute `variable_step`)
     interface: str        # the FMI interface it steps the FMUs through (class attribute
     #                       `interface`, default "CoSimulation")
+    options: frozenset = frozenset()  # the names of the options it declares (`options`)
 
     @property
     def monolithic(self) -> bool:
@@ -91,7 +92,8 @@ def traits(algorithm: str) -> Traits:
     the scene reader has refused it)."""
     cls = MASTERS.get(algorithm)
     return Traits(algorithm, bool(getattr(cls, "variable_step", False)),
-                  getattr(cls, "interface", CO_SIMULATION))
+                  getattr(cls, "interface", CO_SIMULATION),
+                  frozenset(o.name for o in getattr(cls, "options", ())))
 
 
 def all_options() -> dict[str, Option]:

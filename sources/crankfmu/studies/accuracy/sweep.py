@@ -111,19 +111,18 @@ def settings_for(scene, algorithms, extrapolations, steps, fmu_tolerances,
     co-simulation masters are set against); for every other master each coupling (each
     extrapolation, then each Taylor order if the master declares the option) x FMU tolerance x
     tolerance (a variable-step master) or step (a fixed-step one)."""
-    from ...masters import MASTERS
     out = []
     for alg in algorithms:
-        if traits(alg).monolithic:
+        kind = traits(alg)
+        if kind.monolithic:
             out.append(Setting(alg, 0, scene.master.step, fmu_tolerances[0],
                                scene.master.tolerance))
             continue
-        declared = {o.name for o in getattr(MASTERS.get(alg), "options", ())}
         couplings = [(ex, 0) for ex in extrapolations] + \
-            [(0, q) for q in taylors if "taylor" in declared]
+            [(0, q) for q in taylors if "taylor" in kind.options]
         for ex, q in couplings:
             for ft in fmu_tolerances:
-                if traits(alg).variable_step:
+                if kind.variable_step:
                     out += [Setting(alg, ex, scene.master.step, ft, tol, q) for tol in tolerances]
                 else:
                     out += [Setting(alg, ex, h, ft, scene.master.tolerance, q) for h in steps]
