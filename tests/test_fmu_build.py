@@ -64,6 +64,29 @@ def test_building_twice_gives_identical_files(tmp_path):
     assert first.read_bytes() == second.read_bytes()
 
 
+def test_a_build_after_a_run_in_the_same_process_carries_the_binaries(fmu_dir, tmp_path):
+    """A run imports the FMU's own copy of pythonfmu (Python files only) as `pythonfmu`, and
+    pythonfmu's builder copies the binaries found beside the imported package: a build in that
+    process wrote an FMU without binaries (fmpy then failed with "Cannot find shared library";
+    two tests of test_cli_options.py did so after another file's runs on the same xdist
+    worker). In a fresh interpreter: a run, then a build, whose FMU carries this platform's
+    binary and is the same file as a build in a process that ran nothing."""
+    script = (
+        "import sys, crankfmu\n"
+        "from pathlib import Path\n"
+        "from crankfmu.fmu.build import build_fmu\n"
+        f"crankfmu.simulate({str(SERVO_PRESS)!r}, stop_time=0.01, fmu_dir={str(fmu_dir)!r}, "
+        "estimate=False)\n"
+        f"build_fmu('DcServoMotor', Path({str(tmp_path / 'after_run')!r}))\n")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr[-3000:]
+    built = tmp_path / "after_run" / "DcServoMotor.fmu"
+    with zipfile.ZipFile(built) as z:
+        assert "binaries/linux64/DcServoMotor.so" in z.namelist() or sys.platform != "linux"
+    assert built.read_bytes() == build_fmu("DcServoMotor", tmp_path / "fresh").read_bytes()
+
+
 @pytest.mark.parametrize("version", [2, 3])
 def test_an_fmu_bundles_the_runtime_and_its_model_folder_only(fmu_dir, fmi3_dir, version):
     """StephensonPress.fmu: runtime/ and models/stephenson_press/, nothing of the catalog, the

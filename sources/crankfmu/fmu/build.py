@@ -212,13 +212,28 @@ def _repack(built: Path, target: Path, slave_class, digest: str, rendered: dict[
     """Rewrite pythonfmu's zip into `target`: our modelDescription, then as `pack`."""
     from .model_description import model_description
 
+    model_name = slave_class.physics_class.model_name
     entries = {}
     with zipfile.ZipFile(built) as z:
         for info in z.infolist():
-            if info.filename != "modelDescription.xml" and not info.is_dir():
+            if info.filename != "modelDescription.xml" and not info.is_dir() \
+                    and not info.filename.startswith("binaries/"):
                 entries[info.filename] = z.read(info)
     entries["modelDescription.xml"] = model_description(slave_class, digest, host())
-    pack(target, entries, rendered, slave_class.physics_class.model_name, 2, card)
+    entries.update(library_binaries(2, model_name))
+    pack(target, entries, rendered, model_name, 2, card)
+
+
+def library_binaries(fmi_version: int, model_identifier: str) -> dict[str, bytes]:
+    """zip name -> bytes of the FMI library's binaries for every platform it carries, named as
+    the FMU's (binaries/<platform>/<model_identifier>.so, .dll, .dylib), from the installed
+    package (library_folder). Not from pythonfmu's builder: it copies the binaries beside the
+    `pythonfmu` package that is imported, and in a process that has run an FMU that is the FMU's
+    copy, Python files only (a build after a run wrote an FMU without binaries)."""
+    binaries = library_folder(fmi_version) / "resources" / "binaries"
+    return {f"binaries/{f.parent.relative_to(binaries).as_posix()}/{model_identifier}{f.suffix}":
+            f.read_bytes()
+            for f in sorted(binaries.rglob("*")) if f.suffix in (".so", ".dll", ".dylib")}
 
 
 def host() -> tuple[str, str]:

@@ -26,8 +26,8 @@ from pathlib import Path
 
 from ..models.catalog import FMU_MODELS, physics_class
 from . import launcher
-from .build import (bundle_on_path, bundle_sources, host, library_folder, model_card_html, pack,
-                    report, validate)
+from .build import (bundle_on_path, bundle_sources, host, library_binaries, model_card_html,
+                    pack, report, validate)
 from .bundle import MARK, digest_of, render
 
 FMI3_DIR = "fmi3"  # under the FMU folder: fmus/fmi3/
@@ -118,11 +118,7 @@ def build_fmu3(model_name: str, dest: Path, effects=None) -> Path:
         slave_class = getattr(importlib.import_module(script.stem), model_name)
         slave_class(instance_name="build", resources=str(tmp))  # the class must instantiate
         entries["modelDescription.xml"] = model_description_fmi3(slave_class, digest, host())
-    binaries = library_folder(3) / "resources" / "binaries"
-    entries[f"binaries/x86_64-linux/{model_name}.so"] = \
-        (binaries / "x86_64-linux" / "libpythonfmu-export.so").read_bytes()
-    entries[f"binaries/x86_64-windows/{model_name}.dll"] = \
-        (binaries / "x86_64-windows" / "pythonfmu-export.dll").read_bytes()
+    entries.update(library_binaries(3, model_name))
     card = model_card_html(model_name).replace("</body>", me_card_html(model_name, effects) +
                                                "</body>")
     dest = Path(dest)
