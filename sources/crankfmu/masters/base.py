@@ -106,6 +106,7 @@ class Master:
         # the reader of System.refresh_outputs), looked up once
         self._sweep_plan = [(c, self.inputs.takers[c], self._advancers[c], system.read_outputs[c])
                             for c in system.order]
+        self._sequential_rows = sequential_rows_plan(system.order, system.in_sources)
 
     # -- options --------------------------------------------------------------------------
     @classmethod
@@ -249,6 +250,8 @@ class Master:
         `start_rows`: the extrapolation rows already computed (comp -> rows), reused."""
         if self.taylor is not None:  # its rows at t are kept: start_rows are those
             return self.taylor.sweep(self, t, h, sequential=True)
+        if not start_rows:
+            return self._planned_sequential_sweep(t, h, order)
         coefficients = Coefficients(self.history, t, order)
         if start_rows:
             coefficients.update(start_rows)
@@ -257,6 +260,19 @@ class Master:
             advance(t, h, gather(coefficients))
             values = outputs[comp] = read()  # System.refresh_outputs
             reached(comp, end, values)
+
+    def _planned_sequential_sweep(self, t: float, h: float, order: int) -> None:
+        """sequential_sweep without rows given: the same rows as Coefficients makes (History.rows,
+        extrapolated or through a source's newest point), made in the order the plan fixed once
+        (sequential_rows_plan) into a plain dict: the lazy dict's lookups and bookkeeping cost
+        about as much as the two FMI calls of a no-op step."""
+        rows_of, rows, newest = self.history.rows, {}, {}
+        end, outputs = t + h, self.system.outputs
+        for (comp, gather, advance, read), make in zip(self._sweep_plan, self._sequential_rows):
+            for src, interpolate in make:
+                rows[src] = rows_of(src, t, order, (end, newest[src]) if interpolate else None)
+            advance(t, h, gather(rows))
+            newest[comp] = outputs[comp] = read()  # System.refresh_outputs
 
     # -- rollback -------------------------------------------------------------------------
     def save_states(self) -> dict:
@@ -296,3 +312,22 @@ class Master:
 
     def coupling_error(self) -> dict:
         return self.power.report()
+
+
+def sequential_rows_plan(order: list, in_sources: dict) -> list[tuple]:
+    """Per component in the stepping order, the sources whose rows a Gauss-Seidel sweep makes
+    before gathering that component's inputs: (source, True) through the source's point at
+    t + h (it stepped earlier in the sweep), (source, False) extrapolated from the history;
+    each made once per sweep and kept for the components after (as Coefficients does)."""
+    position = {comp: k for k, comp in enumerate(order)}
+    made: dict[str, bool] = {}
+    plan = []
+    for k, comp in enumerate(order):
+        make = []
+        for src in dict.fromkeys(src for src, _ in in_sources[comp]):
+            interpolate = position[src] < k
+            if made.get(src) is not interpolate:
+                make.append((src, interpolate))
+                made[src] = interpolate
+        plan.append(tuple(make))
+    return plan
