@@ -231,12 +231,15 @@ def test_a_gauss_seidel_sweep_makes_each_sources_rows_once_per_kind():
     """Stepping order a, b, c; a reads c, b reads a, c reads a, b and itself: a extrapolates
     c, b interpolates a (stepped before it), c interpolates b and reuses the rows b made of a
     and those a made of c (c has not stepped yet: still extrapolated)."""
-    from crankfmu.masters.base import sequential_rows_plan
+    from crankfmu.masters.base import rows_plan
 
     in_sources = {"a": [("c", 0)], "b": [("a", 0), ("a", 1)],
                   "c": [("a", 0), ("b", 0), ("c", 1)]}
-    assert sequential_rows_plan(["a", "b", "c"], in_sources) == [
+    assert rows_plan(["a", "b", "c"], in_sources, sequential=True) == [
         (("c", False),), (("a", True),), (("b", True),)]
+    # Jacobi: everything extrapolated, each source once
+    assert rows_plan(["a", "b", "c"], in_sources, sequential=False) == [
+        (("c", False),), (("a", False),), (("b", False),)]
 
 
 def test_recorder_rows_are_a_snapshot_and_a_short_row_is_refused():

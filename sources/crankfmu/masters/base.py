@@ -106,7 +106,8 @@ class Master:
         # the reader of System.refresh_outputs), looked up once
         self._sweep_plan = [(c, self.inputs.takers[c], self._advancers[c], system.read_outputs[c])
                             for c in system.order]
-        self._sequential_rows = sequential_rows_plan(system.order, system.in_sources)
+        self._sequential_rows = rows_plan(system.order, system.in_sources, sequential=True)
+        self._parallel_rows = rows_plan(system.order, system.in_sources, sequential=False)
 
     # -- options --------------------------------------------------------------------------
     @classmethod
@@ -235,10 +236,11 @@ class Master:
         the Taylor coupling's rows)."""
         if self.taylor is not None:
             return self.taylor.sweep(self, t, h, sequential=False)
-        coefficients = Coefficients(self.history, t, order)
-        plan = self._sweep_plan
-        for _, gather, advance, _ in plan:
-            advance(t, h, gather(coefficients))
+        rows_of, rows, plan = self.history.rows, {}, self._sweep_plan
+        for (_, gather, advance, _), make in zip(plan, self._parallel_rows):
+            for src, _ in make:  # extrapolated, each once (rows_plan)
+                rows[src] = rows_of(src, t, order)
+            advance(t, h, gather(rows))
         outputs = self.system.outputs
         for comp, _, _, read in plan:
             outputs[comp] = read()  # System.refresh_outputs
@@ -264,7 +266,7 @@ class Master:
     def _planned_sequential_sweep(self, t: float, h: float, order: int) -> None:
         """sequential_sweep without rows given: the same rows as Coefficients makes (History.rows,
         extrapolated or through a source's newest point), made in the order the plan fixed once
-        (sequential_rows_plan) into a plain dict: the lazy dict's lookups and bookkeeping cost
+        (rows_plan) into a plain dict: the lazy dict's lookups and bookkeeping cost
         about as much as the two FMI calls of a no-op step."""
         rows_of, rows, newest = self.history.rows, {}, {}
         end, outputs = t + h, self.system.outputs
@@ -314,18 +316,19 @@ class Master:
         return self.power.report()
 
 
-def sequential_rows_plan(order: list, in_sources: dict) -> list[tuple]:
-    """Per component in the stepping order, the sources whose rows a Gauss-Seidel sweep makes
-    before gathering that component's inputs: (source, True) through the source's point at
-    t + h (it stepped earlier in the sweep), (source, False) extrapolated from the history;
-    each made once per sweep and kept for the components after (as Coefficients does)."""
+def rows_plan(order: list, in_sources: dict, sequential: bool) -> list[tuple]:
+    """Per component in the stepping order, the sources whose rows a sweep makes before
+    gathering that component's inputs: (source, True) through the source's point at t + h (a
+    Gauss-Seidel sweep, `sequential`, stepped it earlier), (source, False) extrapolated from
+    the history; each made once per sweep and kept for the components after (as Coefficients
+    makes them when first read)."""
     position = {comp: k for k, comp in enumerate(order)}
     made: dict[str, bool] = {}
     plan = []
     for k, comp in enumerate(order):
         make = []
         for src in dict.fromkeys(src for src, _ in in_sources[comp]):
-            interpolate = position[src] < k
+            interpolate = sequential and position[src] < k
             if made.get(src) is not interpolate:
                 make.append((src, interpolate))
                 made[src] = interpolate
