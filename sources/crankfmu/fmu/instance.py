@@ -121,6 +121,8 @@ def _take_slave(key: tuple, instance_name: str) -> FMU2Slave:
 class FmuInstance:
     """One instantiated FMU in a scene."""
 
+    _slave_key: tuple | None = None  # where terminate gives the fmpy slave back (_take_slave)
+
     def __init__(self, name: str, path: Path, log=None):
         self.name, self.path = name, Path(path)
         self._component = None
@@ -157,7 +159,8 @@ class FmuInstance:
             self.slave.terminate()
         finally:
             self.slave.fmi2FreeInstance(component)
-            _IDLE_SLAVES.setdefault(self._slave_key, []).append(self.slave)
+            if self._slave_key is not None:  # an FMI 2.0 slave (not Fmu3Instance's calls)
+                _IDLE_SLAVES.setdefault(self._slave_key, []).append(self.slave)
 
     # -- values ----------------------------------------------------------------------------
     def variable(self, name: str):
