@@ -62,6 +62,28 @@ def test_state_rollback_restores_internal_states_exactly(fmu_dir):
     fmu.terminate()
 
 
+def test_instances_of_one_fmu_at_once_are_apart_and_a_freed_ones_calls_are_reused(fmu_dir):
+    """Two instances of one FMU live at once (two components of one file): each has its own
+    fmpy object, its own parameters and its own outputs; a later instance takes the fmpy object
+    of a freed one (fmu.instance._take_slave: its FMI functions are not loaded again)."""
+    def law(fmu, w):  # the static law: the torque follows the input at once
+        fmu.writer(["flange_w", "u"])([w, 220.0])
+        return fmu.reader(["flange_tau"])()[0]
+    a = start(fmu_dir, "DcServoMotor", {"effect_electrical_lag": False, "k_phi": 1.3}, "a")
+    b = start(fmu_dir, "DcServoMotor", {"effect_electrical_lag": False, "k_phi": 2.6}, "b")
+    assert a.slave is not b.slave
+    assert law(a, 100.0) == pytest.approx(1.3 / 0.5 * 220 - 1.3 ** 2 / 0.5 * 100, rel=1e-15)
+    assert law(b, 100.0) == pytest.approx(2.6 / 0.5 * 220 - 2.6 ** 2 / 0.5 * 100, rel=1e-15)
+    freed = a.slave
+    a.terminate()
+    c = start(fmu_dir, "DcServoMotor", {"effect_electrical_lag": False, "k_phi": 0.65}, "c")
+    assert c.slave is freed and c.slave.instanceName == "c"
+    assert law(c, 50.0) == pytest.approx(0.65 / 0.5 * 220 - 0.65 ** 2 / 0.5 * 50, rel=1e-15)
+    assert law(b, 50.0) == pytest.approx(2.6 / 0.5 * 220 - 2.6 ** 2 / 0.5 * 50, rel=1e-15)
+    b.terminate()
+    c.terminate()
+
+
 def test_tolerance_from_setup_experiment_is_honoured(fmu_dir):
     """A loose tolerance must give a visibly different (worse) answer than a tight one."""
     results = {}

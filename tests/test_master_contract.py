@@ -207,6 +207,56 @@ def test_history_rows_extrapolate_a_parabola_exactly():
     assert np.asarray(history.rows("a", 0.0, 0)).tolist() == [[1.0]]
 
 
+def test_newton_forms_are_exact_for_every_signal_count():
+    """The generated Newton forms (one per signal count, history._NewtonForms): through points
+    of n lines (2 points) and n parabolas (3 points, unevenly spaced, none at s = 0) the rows
+    are the Taylor coefficients at s = 0, to 1e-9 of coefficients of order 1 (round-off of
+    differences over steps of 1e-3)."""
+    from crankfmu.masters.history import _line, _parabola
+
+    rng = np.random.default_rng(5)
+    for n in range(5):
+        c = rng.normal(size=(3, n))  # y_i(s) = c0 + c1 s + c2 s^2 / 2
+        s = (0.4e-3, -1.1e-3, -2.0e-3)
+        points = [(c[0] + c[1] * x + 0.5 * c[2] * x * x).tolist() for x in s]
+        rows = _parabola(*s, *points)
+        assert len(rows) == 3 and all(len(r) == n for r in rows)
+        assert np.allclose(np.array(rows).reshape(3, n), c, rtol=0, atol=1e-9)
+        line = [(c[0] + c[1] * x).tolist() for x in s[:2]]
+        assert np.allclose(np.array(_line(*s[:2], *line)).reshape(2, n), c[:2], rtol=0,
+                           atol=1e-9)
+
+
+def test_a_gauss_seidel_sweep_makes_each_sources_rows_once_per_kind():
+    """Stepping order a, b, c; a reads c, b reads a, c reads a, b and itself: a extrapolates
+    c, b interpolates a (stepped before it), c interpolates b and reuses the rows b made of a
+    and those a made of c (c has not stepped yet: still extrapolated)."""
+    from crankfmu.masters.base import rows_plan
+
+    in_sources = {"a": [("c", 0)], "b": [("a", 0), ("a", 1)],
+                  "c": [("a", 0), ("b", 0), ("c", 1)]}
+    assert rows_plan(["a", "b", "c"], in_sources, sequential=True) == [
+        (("c", False),), (("a", True),), (("b", True),)]
+    # Jacobi: everything extrapolated, each source once
+    assert rows_plan(["a", "b", "c"], in_sources, sequential=False) == [
+        (("c", False),), (("a", False),), (("b", False),)]
+
+
+def test_recorder_rows_are_a_snapshot_and_a_short_row_is_refused():
+    from crankfmu.cosim.results import Recorder
+
+    rec = Recorder(["a.x", "a.y"], ["m", None])
+    rec.add(0.0, [1.0, 2.0])
+    first = rec.rows
+    rec.add(0.5, [3.0, 4.0])
+    assert first.tolist() == [[0.0, 1.0, 2.0]]
+    assert rec.rows.tolist() == [[0.0, 1.0, 2.0], [0.5, 3.0, 4.0]] and rec.count == 2
+    assert rec.column("a.y").tolist() == [2.0, 4.0]
+    with pytest.raises(ValueError, match="a row of 1 values for 2 recorded variables"):
+        rec.add(1.0, [5.0])
+    assert rec.count == 2 and rec.rows.shape == (2, 3)
+
+
 def test_error_scale_is_the_largest_magnitude_at_least_the_nominal():
     system = SimpleNamespace(outputs={"a": np.zeros(2)}, out_names={"a": ["x", "y"]},
                              fmus={"a": SimpleNamespace(variables={

@@ -106,6 +106,8 @@ class Master:
         # the reader of System.refresh_outputs), looked up once
         self._sweep_plan = [(c, self.inputs.takers[c], self._advancers[c], system.read_outputs[c])
                             for c in system.order]
+        self._sequential_rows = rows_plan(system.order, system.in_sources, sequential=True)
+        self._parallel_rows = rows_plan(system.order, system.in_sources, sequential=False)
 
     # -- options --------------------------------------------------------------------------
     @classmethod
@@ -234,10 +236,11 @@ class Master:
         the Taylor coupling's rows)."""
         if self.taylor is not None:
             return self.taylor.sweep(self, t, h, sequential=False)
-        coefficients = Coefficients(self.history, t, order)
-        plan = self._sweep_plan
-        for _, gather, advance, _ in plan:
-            advance(t, h, gather(coefficients))
+        rows_of, rows, plan = self.history.rows, {}, self._sweep_plan
+        for (_, gather, advance, _), make in zip(plan, self._parallel_rows):
+            for src, _ in make:  # extrapolated, each once (rows_plan)
+                rows[src] = rows_of(src, t, order)
+            advance(t, h, gather(rows))
         outputs = self.system.outputs
         for comp, _, _, read in plan:
             outputs[comp] = read()  # System.refresh_outputs
@@ -249,6 +252,8 @@ class Master:
         `start_rows`: the extrapolation rows already computed (comp -> rows), reused."""
         if self.taylor is not None:  # its rows at t are kept: start_rows are those
             return self.taylor.sweep(self, t, h, sequential=True)
+        if not start_rows:
+            return self._planned_sequential_sweep(t, h, order)
         coefficients = Coefficients(self.history, t, order)
         if start_rows:
             coefficients.update(start_rows)
@@ -257,6 +262,19 @@ class Master:
             advance(t, h, gather(coefficients))
             values = outputs[comp] = read()  # System.refresh_outputs
             reached(comp, end, values)
+
+    def _planned_sequential_sweep(self, t: float, h: float, order: int) -> None:
+        """sequential_sweep without rows given: the same rows as Coefficients makes (History.rows,
+        extrapolated or through a source's newest point), made in the order the plan fixed once
+        (rows_plan) into a plain dict: the lazy dict's lookups and bookkeeping cost
+        about as much as the two FMI calls of a no-op step."""
+        rows_of, rows, newest = self.history.rows, {}, {}
+        end, outputs = t + h, self.system.outputs
+        for (comp, gather, advance, read), make in zip(self._sweep_plan, self._sequential_rows):
+            for src, interpolate in make:
+                rows[src] = rows_of(src, t, order, (end, newest[src]) if interpolate else None)
+            advance(t, h, gather(rows))
+            newest[comp] = outputs[comp] = read()  # System.refresh_outputs
 
     # -- rollback -------------------------------------------------------------------------
     def save_states(self) -> dict:
@@ -296,3 +314,23 @@ class Master:
 
     def coupling_error(self) -> dict:
         return self.power.report()
+
+
+def rows_plan(order: list, in_sources: dict, sequential: bool) -> list[tuple]:
+    """Per component in the stepping order, the sources whose rows a sweep makes before
+    gathering that component's inputs: (source, True) through the source's point at t + h (a
+    Gauss-Seidel sweep, `sequential`, stepped it earlier), (source, False) extrapolated from
+    the history; each made once per sweep and kept for the components after (as Coefficients
+    makes them when first read)."""
+    position = {comp: k for k, comp in enumerate(order)}
+    made: dict[str, bool] = {}
+    plan = []
+    for k, comp in enumerate(order):
+        make = []
+        for src in dict.fromkeys(src for src, _ in in_sources[comp]):
+            interpolate = sequential and position[src] < k
+            if made.get(src) is not interpolate:
+                make.append((src, interpolate))
+                made[src] = interpolate
+        plan.append(tuple(make))
+    return plan

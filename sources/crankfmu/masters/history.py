@@ -26,28 +26,57 @@ def taylor_rows(s, values) -> list[list[float]]:
 
 def _line(x0: float, x1: float, p_values: list, q_values: list) -> list[list[float]]:
     """taylor_rows through two points: p(s) = p + f01 (s - x0)."""
-    a = 1.0 / (x1 - x0)
-    r0, r1 = [], []
-    for p, q in zip(p_values, q_values):
-        f01 = a * (q - p)
-        r0.append(p - x0 * f01)
-        r1.append(f01)
-    return [r0, r1]
+    return _LINES[len(p_values)](x0, x1, p_values, q_values)
 
 
 def _parabola(x0: float, x1: float, x2: float, p_values: list, q_values: list,
               r_values: list) -> list[list[float]]:
     """taylor_rows through three points: p(s) = p + f01 (s - x0) + f012 (s - x0)(s - x1)."""
-    a, b, c = 1.0 / (x1 - x0), 1.0 / (x2 - x1), 1.0 / (x2 - x0)
-    x0x1, x01 = x0 * x1, x0 + x1
-    r0, r1, r2 = [], [], []
-    for p, q, r in zip(p_values, q_values, r_values):
-        f01 = a * (q - p)
-        f012 = c * (b * (r - q) - f01)
-        r0.append(p - x0 * f01 + x0x1 * f012)
-        r1.append(f01 - x01 * f012)
-        r2.append(2.0 * f012)
-    return [r0, r1, r2]
+    return _PARABOLAS[len(p_values)](x0, x1, x2, p_values, q_values, r_values)
+
+
+class _NewtonForms(dict):
+    """signal count n -> the Newton form for n signals, generated on first use with every
+    signal spelled out (as runtime/dopri.stepper): a loop over zip() with three appends per
+    signal cost more than the arithmetic, and these run for every source in every step. Per
+    signal the operations and their order are those of the formulas in the docstrings."""
+
+    def __init__(self, points: int):
+        super().__init__()
+        self.points = points
+
+    def __missing__(self, n: int):
+        form = self[n] = _newton_form(self.points, n)
+        return form
+
+
+def _newton_form(points: int, n: int):
+    def unpack(name: str, letter: str) -> str:
+        names = ", ".join(f"{letter}{i}" for i in range(n))
+        return f"    {names}{',' if n == 1 else ''} = {name}" if n else ""
+
+    def row(term: str) -> str:
+        return "[" + ", ".join(term.format(i=i) for i in range(n)) + "]"
+    if points == 2:
+        lines = ["def line(x0, x1, P, Q):", "    a = 1.0 / (x1 - x0)",
+                 unpack("P", "p"), unpack("Q", "q")]
+        lines += [f"    f{i} = a * (q{i} - p{i})" for i in range(n)]
+        lines.append(f"    return [{row('p{i} - x0 * f{i}')}, {row('f{i}')}]")
+    else:
+        lines = ["def parabola(x0, x1, x2, P, Q, R):",
+                 "    a, b, c = 1.0 / (x1 - x0), 1.0 / (x2 - x1), 1.0 / (x2 - x0)",
+                 "    x0x1, x01 = x0 * x1, x0 + x1",
+                 unpack("P", "p"), unpack("Q", "q"), unpack("R", "r")]
+        for i in range(n):
+            lines += [f"    f{i} = a * (q{i} - p{i})", f"    g{i} = c * (b * (r{i} - q{i}) - f{i})"]
+        lines.append(f"    return [{row('p{i} - x0 * f{i} + x0x1 * g{i}')}, "
+                     f"{row('f{i} - x01 * g{i}')}, {row('2.0 * g{i}')}]")
+    namespace: dict = {}
+    exec("\n".join(lines), namespace)  # noqa: S102 - source built above, from n alone
+    return namespace["line" if points == 2 else "parabola"]
+
+
+_LINES, _PARABOLAS = _NewtonForms(2), _NewtonForms(3)
 
 
 def _floats(values) -> list:
@@ -100,16 +129,20 @@ class History:
             if k == 1:
                 return [values[-1][comp]]
             if k == 2:
-                return _line(times[-1] - t, times[-2] - t, values[-1][comp], values[-2][comp])
-            return _parabola(times[-1] - t, times[-2] - t, times[-3] - t, values[-1][comp],
-                             values[-2][comp], values[-3][comp])
+                newest_values = values[-1][comp]
+                return _LINES[len(newest_values)](times[-1] - t, times[-2] - t, newest_values,
+                                                  values[-2][comp])
+            newest_values = values[-1][comp]
+            return _PARABOLAS[len(newest_values)](times[-1] - t, times[-2] - t, times[-3] - t,
+                                                  newest_values, values[-2][comp],
+                                                  values[-3][comp])
         t_new, new = newest
         if type(new) is not list:
             new = _floats(new)
         if k == 1:
-            return _line(times[-1] - t, t_new - t, values[-1][comp], new)
-        return _parabola(times[-1] - t, t_new - t, times[-2] - t, values[-1][comp], new,
-                         values[-2][comp])
+            return _LINES[len(new)](times[-1] - t, t_new - t, values[-1][comp], new)
+        return _PARABOLAS[len(new)](times[-1] - t, t_new - t, times[-2] - t, values[-1][comp],
+                                    new, values[-2][comp])
 
 
 class Coefficients(dict):
