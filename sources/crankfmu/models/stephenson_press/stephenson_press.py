@@ -111,7 +111,7 @@ class StephensonPress(PhysicsModel):
     # -- the equations: one core, for a float or an array --------------------------------
     # The right-hand side calls `crank_terms` on floats with math's functions (~20x cheaper
     # than numpy on one value); the public functions below take a scalar or an array phi (the
-    # analyses' grids) and reach the same core, over an array with numpy's functions (~60x
+    # analyses' grids) and reach the same core, over an array with numpy's functions (~50x
     # cheaper than the core called per element), so each equation is written once.
     def crank_terms(self, phi, J_input: float, f=ON_FLOATS) -> tuple:
         """(J, J'/2, M_C, F5, S, S', S'', psi, psi', psi'') at one crank angle: eq. (1)-(3),
