@@ -79,8 +79,9 @@ class RigidClutch(PhysicsModel):
         J = self.crank_inertia(x[self.i_phi])
         return dx, J * dx[self.i_w], J
 
-    def drive_inputs(self, t, X) -> np.ndarray:
-        _, M, J = self.mech_terms(t, X)
+    def drive_inputs(self, t, X, terms=None) -> np.ndarray:
+        """The drive's inputs at state X (terms: mech_terms(t, X) if already at hand)."""
+        _, M, J = terms or self.mech_terms(t, X)
         i = self.mech.p.gear_ratio
         w_a = self.drive.sun_speed(X[:N_DRIVE])
         return np.array([self.command, self.motor.torque(w_a), self.motor.J_shaft, M / i,
@@ -102,8 +103,9 @@ class RigidClutch(PhysicsModel):
         return np.concatenate([self.drive.initial_state(self.drive_inputs(0.0, X)), xm[self.keep]])
 
     def derivatives(self, t, X, u=None):
-        dx, M, _ = self.mech_terms(t, X)
-        dd = self.drive.derivatives(t, X[:N_DRIVE], self.drive_inputs(t, X))
+        terms = self.mech_terms(t, X)  # once: the drive's inputs are made of them too
+        dx, M, _ = terms
+        dd = self.drive.derivatives(t, X[:N_DRIVE], self.drive_inputs(t, X, terms))
         dm = dx[self.keep]
         names = [self.mech.state_names()[k] for k in self.keep]
         if "W_drive" in names:  # the crank's work on the rod, as driven_crank defines it

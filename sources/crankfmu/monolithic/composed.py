@@ -227,11 +227,9 @@ class ComposedModel(PhysicsModel):
         """The input vector of every part at time t and composed state x."""
         xs = self.split(x)
         outs = [None] * len(self.parts)
-        us = [self._fill(p, t, outs) for p in self.parts]
-        for k, _ in self.plan:
+        for k, _ in self.plan:  # each part's outputs from the inputs its sources have so far
             part = self.parts[k]
-            us[k] = self._fill(part, t, outs)
-            outs[k] = part.model.output_values(t, xs[k], us[k])
+            outs[k] = part.model.output_values(t, xs[k], self._fill(part, t, outs))
         return [self._fill(p, t, outs) for p in self.parts]
 
     def _held_time(self, signal, t: float) -> float:

@@ -203,11 +203,13 @@ def press_steady_revolution(press, motor, u0: float, revolutions: int = 6,
         return [i * w, i * phi, u0, 0.0]
 
     def rhs(t, x):
-        y = motor.output_values(t, x[2:], motor_u(x[0], x[1]))
-        tau_extra = crank_mass.moment(x[0]) / i if crank_mass else 0.0
-        dx = list(press.derivatives(t, x[:2], [y[0] + tau_extra, y[1] + J_extra, 0.0, 0.0]))
+        phi, w = x[0], x[1]
+        x_m, u_m = x[2:], motor_u(phi, w)   # the motor's states and inputs, made once
+        y = motor.output_values(t, x_m, u_m)
+        tau_extra = crank_mass.moment(phi) / i if crank_mass else 0.0
+        dx = [*press.derivatives(t, (phi, w), [y[0] + tau_extra, y[1] + J_extra, 0.0, 0.0])]
         if n_m:
-            dx += list(motor.derivatives(t, x[2:], motor_u(x[0], x[1])))
+            dx += motor.derivatives(t, x_m, u_m)
         return dx
     w0 = pa.mean_speed(pa.ReducedDrive.from_models(press, motor, u0))
     x0 = [0.0, w0] + list(motor.initial_state(motor_u(0.0, w0)))

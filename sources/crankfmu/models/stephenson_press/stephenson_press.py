@@ -15,6 +15,16 @@ G_STANDARD = 9.80665  # m/s^2
 EDGE_BAND = 1e-12      # rad per rad of |phi|: an edge this close to the restart was just passed
 
 
+class ON_FLOATS:
+    """The core's functions on one float (math's)."""
+    sin, cos, sqrt, atan2 = math.sin, math.cos, math.sqrt, math.atan2
+
+
+class ELEMENTWISE:
+    """The core's functions elementwise on arrays (numpy's)."""
+    sin, cos, sqrt, atan2 = np.sin, np.cos, np.sqrt, np.arctan2
+
+
 class StephensonPress(PhysicsModel):
     model_name = "StephensonPress"
     description = "Stephenson six-bar crank press: one-DOF reduced dynamics of the crank"
@@ -98,19 +108,22 @@ class StephensonPress(PhysicsModel):
         p = self.p  # r, l, r/l, i^2, J1 + m2 r^2 (base link in circular translation), m5
         self._constants = (p.r, p.l, p.r / p.l, p.gear_ratio ** 2, p.J1 + p.m2 * p.r ** 2, p.m5)
 
-    # -- the equations: one scalar core -----------------------------------------------------
-    # The right-hand side calls `crank_terms` on floats (math: ~20x cheaper than numpy on one
-    # value); the public functions below take a scalar or an array phi and reach the same core
-    # (np.vectorize for arrays: the analyses' grids), so each equation is written once.
-    def crank_terms(self, phi: float, J_input: float) -> tuple[float, ...]:
+    # -- the equations: one core, for a float or an array --------------------------------
+    # The right-hand side calls `crank_terms` on floats with math's functions (~20x cheaper
+    # than numpy on one value); the public functions below take a scalar or an array phi (the
+    # analyses' grids) and reach the same core, over an array with numpy's functions (~50x
+    # cheaper than the core called per element), so each equation is written once.
+    def crank_terms(self, phi, J_input: float, f=ON_FLOATS) -> tuple:
         """(J, J'/2, M_C, F5, S, S', S'', psi, psi', psi'') at one crank angle: eq. (1)-(3),
         (21)-(22). One function, not one per quantity: the right-hand side calls it 7 times per
-        step, and in Python the calls would cost as much as the arithmetic."""
+        step, and in Python the calls would cost as much as the arithmetic. phi a float, or with
+        f = ELEMENTWISE an array (the terms then arrays, or floats where constant: F5 = 0.0
+        without forging_load)."""
         p = self.p
         r, l, r_l, i2_, J_fixed, m5 = self._constants
-        sin_phi, cos_phi = math.sin(phi), math.cos(phi)
+        sin_phi, cos_phi = f.sin(phi), f.cos(phi)
         cos_psi = -r_l * cos_phi
-        sin_psi = math.sqrt(1.0 - cos_psi * cos_psi)
+        sin_psi = f.sqrt(1.0 - cos_psi * cos_psi)
         dpsi = -r_l * sin_phi / sin_psi
         ddpsi = -(r_l * cos_phi + dpsi * dpsi * cos_psi) / sin_psi
         S = r * sin_phi + l * sin_psi + p.a  # + a last: a = 0 leaves S bit-identical
@@ -121,8 +134,9 @@ class StephensonPress(PhysicsModel):
         F5 = 0.0
         if self._forging:  # half sine over the window ending at BDC
             x = (phi - (0.5 * math.pi - p.forging_angle)) % (2 * math.pi)
-            if x <= p.forging_angle:
-                F5 = p.F_max * math.sin(math.pi * x / p.forging_angle)
+            inside = x <= p.forging_angle  # a bool, or an array of them
+            if f is ELEMENTWISE or inside:  # on a float, the sine only inside the window
+                F5 = p.F_max * f.sin(math.pi * x / p.forging_angle) * inside  # * True: exact
         M_C = -F5 * dS
         if self._gravity:
             M_C += m5 * p.g * dS + p.m2 * p.g * r * cos_phi
@@ -135,22 +149,22 @@ class StephensonPress(PhysicsModel):
             half_dJ += 2.0 * (p.m_rod * (dCx * ddCx + dCy * ddCy) + J_rod * dpsi * ddpsi)
             if self._gravity:
                 M_C += 2.0 * p.m_rod * p.g * dCy
-        return (J, half_dJ, M_C, F5, S, dS, ddS, math.atan2(sin_psi, cos_psi), dpsi, ddpsi)
+        return (J, half_dJ, M_C, F5, S, dS, ddS, f.atan2(sin_psi, cos_psi), dpsi, ddpsi)
 
     def kinematics(self, phi):
         """(S, S', S'', psi, psi', psi'') for scalar or array phi."""
-        return _over(lambda a: self.crank_terms(a, 0.0)[4:], phi, 6)
+        return _over(lambda a, f: self.crank_terms(a, 0.0, f)[4:], phi, 6)
 
     def reduced_inertia(self, phi, J_input: float):
         """(J(phi), J'(phi)/2) at the crank."""
-        return _over(lambda a: self.crank_terms(a, J_input)[:2], phi, 2)
+        return _over(lambda a, f: self.crank_terms(a, J_input, f)[:2], phi, 2)
 
     def resistance_moment(self, phi):
         """M_C(phi) at the crank: forging force and weights (their generalized forces)."""
-        return _over(lambda a: self.crank_terms(a, 0.0)[2], phi, 1)
+        return _over(lambda a, f: self.crank_terms(a, 0.0, f)[2], phi, 1)
 
     def forging_force(self, phi):
-        return _over(lambda a: self.crank_terms(a, 0.0)[3], phi, 1)
+        return _over(lambda a, f: self.crank_terms(a, 0.0, f)[3], phi, 1)
 
     def J_constant(self, J_input: float) -> float:
         """J_c = i^2 J_input + J1 + m2 r^2 (base link in circular translation, eq. 21-22)."""
@@ -243,8 +257,14 @@ def _crossing(angle: float, direction: int):
     return g
 
 
-def _over(scalar_function, phi, n_out: int):
-    """scalar_function at a scalar phi, or elementwise over an array (tuples of arrays)."""
+def _over(terms, phi, n_out: int):
+    """terms(phi, functions) (a float, or a tuple of n_out floats) at a scalar phi, or over an
+    array of phi: float arrays of phi's shape (a term that is a constant, such as F5 = 0
+    without forging_load, broadcast)."""
     if isinstance(phi, (float, int)):
-        return scalar_function(float(phi))
-    return np.vectorize(scalar_function, otypes=[float] * n_out)(np.asarray(phi, dtype=float))
+        return terms(float(phi), ON_FLOATS)
+    phi = np.asarray(phi, dtype=float)
+    values = terms(phi, ELEMENTWISE)
+    if n_out == 1:
+        return np.broadcast_to(np.asarray(values, dtype=float), phi.shape).copy()
+    return tuple(np.broadcast_to(np.asarray(v, dtype=float), phi.shape).copy() for v in values)
