@@ -106,26 +106,35 @@ def planetary(tmp_path, fmus, executor, steps, **options):
         executor=executor, **options))
 
 
-def test_planetary_lock_time_converges_first_order(tmp_path, hybrid_fmus, one_worker):
+@pytest.fixture(scope="module")
+def planetary_sweep(tmp_path_factory, hybrid_fmus, one_worker):
+    """(folder, result) of the sweep at 4e-4 and 2e-4 s: the first order's two runs, and the
+    first sweep the resume and --reference checks repeat (its reference and its 4e-4 run)."""
+    folder = tmp_path_factory.mktemp("planetary_sweep")
+    return folder, planetary(folder, hybrid_fmus, one_worker, [4e-4, 2e-4])
+
+
+def test_planetary_lock_time_converges_first_order(planetary_sweep):
     """Gauss-Seidel with the held motor torque: the lock-time error is first order in the step
     (docs/accuracy.md). Slope between 4e-4 and 2e-4 s within 0.8-1.2: measured 1.00."""
-    result = planetary(tmp_path, hybrid_fmus, one_worker, [4e-4, 2e-4])
+    _, result = planetary_sweep
     lock = [o.extra["events"]["drive.t_lock_b at end"] for o in result.outcomes]
     assert all(o.status == "completed" for o in result.outcomes)
     order = math.log(lock[0] / lock[1]) / math.log(2.0)
     assert 0.8 < order < 1.2 and lock[1] < 1e-4
 
 
-def test_resume_and_external_reference(tmp_path, hybrid_fmus, one_worker):
+def test_resume_and_external_reference(tmp_path, planetary_sweep, hybrid_fmus, one_worker):
     """A second sweep over the same folder takes every run from there (same figures); the
     reference file written by the first, given as --reference, gives the same errors."""
-    first = planetary(tmp_path / "a", hybrid_fmus, one_worker, [4e-4])
+    folder, first = planetary_sweep
     seen = []
-    again = planetary(tmp_path / "a", hybrid_fmus, one_worker, [4e-4],
+    again = planetary(folder, hybrid_fmus, one_worker, [4e-4, 2e-4],
                       report=lambda o, kept: seen.append(kept))
-    assert seen == [True] and again.outcomes[0].error == first.outcomes[0].error
+    assert seen == [True, True]
+    assert [o.error for o in again.outcomes] == [o.error for o in first.outcomes]
     external = planetary(tmp_path / "b", hybrid_fmus, one_worker, [4e-4],
-                         reference_csv=tmp_path / "a" / "reference.csv")
+                         reference_csv=folder / "reference.csv")
     assert external.outcomes[0].error == first.outcomes[0].error
     assert not (tmp_path / "b" / "reference.csv").exists()
 

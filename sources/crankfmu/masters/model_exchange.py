@@ -7,9 +7,15 @@ order their direct feedthrough needs: `evaluation_plan`) and the derivatives rea
 is exact, as in the monolithic reference (monolithic/composed.py), but through the FMUs: it is the
 solution a co-simulation approaches as its step goes to zero, computed with the FMUs themselves.
 
-scipy's solve_ivp integrates over each communication step (the runner's grid; a step that
-crosses an edge of a step-table input ends there) with every FMU's event indicators as terminal
-events. At a zero crossing the master takes the first point past it on the solver's dense output
+scipy's DOP853 (or Radau) integrates the states with every FMU's event indicators as terminal
+events, located as solve_ivp locates them (a sign change over a solver step, the root by Brent's
+method on that step's dense output). The master drives the solver's steps itself: one solver goes
+on over the communication steps (the runner's grid; a step that crosses an edge of a step-table
+input ends there) with steps of its own length (10 ms and more on the servo press, whose grid is
+1 ms; a solver per communication step, as solve_ivp would be, took two steps in each), the state
+at a communication point from the dense output of the step that contains it, until an event (or a
+crossing beyond the communication step: the next one starts a new solver there, and meets it).
+At a zero crossing the master takes the first point past it on the solver's dense output
 (the FMU sees the indicator's new sign, as FMI asks), gives every FMU that point, and runs the
 event iteration: fmi3EnterEventMode, fmi3UpdateDiscreteStates (twice, so that a mode change that
 moves outputs reaches the inputs it feeds), the states read back, fmi3EnterContinuousTimeMode;
@@ -192,7 +198,10 @@ class ModelExchange(Master):
         self._hold = 0.0       # s: the segment's start, where step tables are read
         self._held = None      # the step tables' values held in the last segment
         self._cache = (None, None, None)  # (t, y bytes, indicators)
-        self._first_step = None
+        self._first_step = None  # s: the step the solver proposed last (None: it chooses)
+        self._solver = None      # scipy's solver, carried over communication steps
+        self._values = self._g = self._dense = None  # its event functions, their values at
+        # its time, its last step's dense output
         self.counts = {"method": self.method, "rhs_evaluations": 0, "solver_steps": 0,
                        "state_events": 0, "input_events": 0}
         self.extra_statistics = self.counts
@@ -256,46 +265,103 @@ class ModelExchange(Master):
             if part.nx:
                 self.y[part.states] = part.continuous_states()
             part.mode("fmi3EnterContinuousTimeMode")
-        self._first_step = None
+        self._first_step = self._solver = None
 
     def _enter_event_mode(self) -> None:
         for part in self.parts:
             part.mode("fmi3EnterEventMode")
 
-    def _events(self, t0: float, y0: np.ndarray) -> list:
-        """scipy event functions, one per indicator; one that is exactly zero at (t0, y0) is
-        NaN there (no crossing at the segment's start: see the module docstring)."""
-        if not self.n_indicators:
-            return []
-        zero = self.indicators(t0, y0) == 0.0
-        events = []
-        for i in range(self.n_indicators):
-            def event(t, y, i=i):
-                if t == t0 and zero[i]:
-                    return math.nan
-                return self.indicators(t, y)[i]
-            event.terminal, event.direction = True, 0.0  # type: ignore[attr-defined]  # scipy's
-            events.append(event)
-        return events
+    def _indicator_values(self, t0: float, zero: np.ndarray):
+        """The event functions' values at (t, y): the indicators, NaN at t0 where `zero` (no
+        crossing at the segment's start: see the module docstring)."""
+        def values(t: float, y: np.ndarray) -> np.ndarray:
+            z = self.indicators(t, y)
+            if t == t0 and zero.any():
+                z = np.where(zero, math.nan, z)
+            return z
+        return values
 
-    def _past_crossing(self, sol, i: int, t_end: float):
-        """The first point after the located root of indicator i where its sign is no longer
-        the one it had before the step that crossed (the dense output of that step); None if it
-        is not reached by t_end."""
-        t_root = float(sol.t_events[i][0])
-        t_before = sol.t[-2] if len(sol.t) > 1 else sol.t[0]
-        before = np.sign(self.indicators(t_before, sol.sol(t_before))[i])
+    def _crossing(self, solver, values, before: np.ndarray, after: np.ndarray):
+        """(indicator, root, the step's dense output) of the first crossing in the solver's
+        last step, from the event functions' values at its ends; None without one. As
+        solve_ivp: a sign change either way, the root by Brent's method to 4 ulp of the time."""
+        active = np.nonzero(((before <= 0.0) & (after >= 0.0)) |
+                            ((before >= 0.0) & (after <= 0.0)))[0]
+        if not active.size:
+            return None
+        from scipy.optimize import brentq
+
+        dense = solver.dense_output()
+        eps = 4.0 * np.finfo(float).eps
+        roots = [brentq(lambda s, i=i: values(s, dense(s))[i], solver.t_old, solver.t,
+                        xtol=eps, rtol=eps) for i in active]
+        k = int(np.argmin(roots))
+        return int(active[k]), float(roots[k]), dense
+
+    def _past_crossing(self, dense, t_before: float, t_root: float, i: int, t_end: float):
+        """The first point after the located root t_root of indicator i where its sign is no
+        longer the one it had at t_before, the start of the solver step that crossed (on that
+        step's dense output); None if it is not reached by t_end."""
+        before = np.sign(self.indicators(t_before, dense(t_before))[i])
         distance = 4.0 * math.ulp(max(abs(t_root), 1.0))  # ~1e-15 s, doubled until past
         t = t_root
         for _ in range(PAST_CROSSING_TRIES):
             if t > t_end:
                 return None
-            y = sol.sol(t)
+            y = dense(t)
             if np.sign(self.indicators(t, y)[i]) != before:
                 return t, y
             t = t_root + distance
             distance *= 2.0
         return None
+
+    def _start_solver(self, t: float) -> None:
+        """A solver from (t, self.y) to the stop time, with the step it last proposed; the
+        event functions' values there."""
+        from scipy.integrate import DOP853, Radau
+
+        t_bound = max(self.system.scene.stop_time, t)
+        first = None if self._first_step is None else min(self._first_step, t_bound - t)
+        self._solver = {"DOP853": DOP853, "Radau": Radau}[self.method](
+            self.rhs, t, self.y.copy(), t_bound, rtol=self.rtol, atol=self.atol,
+            first_step=first or None)
+        self._values = self._indicator_values(t, self.indicators(t, self.y) == 0.0) \
+            if self.n_indicators else None
+        self._g = self._values(t, self.y) if self._values else None
+        self._dense = None
+
+    def _integrate(self, t: float, t_end: float):
+        """self.y at t_end: (t_end, None); or (root, indicator, that step's dense output, the
+        step's start) at the first crossing before t_end. The solver goes on from one
+        communication step to the next (steps of their own length, t_end within one: the state
+        there from its dense output) until an event or a crossing after t_end (then the next
+        communication step starts a new one from t_end, and meets the crossing)."""
+        if self._solver is None:
+            self._start_solver(t)
+        solver = self._solver
+        while solver.t < t_end and solver.status == "running":
+            message = solver.step()
+            if solver.status == "failed":
+                raise RuntimeError(f"{self.method} failed at t = {solver.t:.9g} s: {message}")
+            self.counts["solver_steps"] += 1
+            self._first_step, self._dense = float(solver.h_abs), None
+            if self._values:
+                g_new = self._values(solver.t, solver.y)
+                crossing = self._crossing(solver, self._values, self._g, g_new)
+                if crossing:
+                    self._solver = None
+                    i, t_root, dense = crossing
+                    if t_root > t_end:
+                        self.y = dense(t_end)
+                        return t_end, None
+                    return t_root, i, dense, solver.t_old
+                self._g = g_new
+        if solver.t <= t_end:  # there (or at the stop time, a rounding short of t_end)
+            self.y = solver.y.copy()
+        else:
+            self._dense = self._dense or solver.dense_output()
+            self.y = self._dense(t_end)
+        return t_end, None
 
     # -- the master contract -----------------------------------------------------------------
     def initialize(self, t0: float) -> None:
@@ -319,8 +385,6 @@ class ModelExchange(Master):
                 for s in signals if s.interpolation == "step"]
 
     def _step(self, t: float, h: float) -> float:
-        from scipy.integrate import solve_ivp
-
         system, t_end = self.system, t + h
         start_inputs = {c: np.array(system.gather_inputs(c)) for c in system.order}
         self._hold = t
@@ -331,24 +395,13 @@ class ModelExchange(Master):
             self._enter_event_mode()
             self._event_iteration(t)
         while True:
-            events = self._events(t, self.y)
-            first = None if self._first_step is None else min(self._first_step, t_end - t)
-            sol = solve_ivp(self.rhs, (t, t_end), self.y, method=self.method, rtol=self.rtol,
-                            atol=self.atol, events=events or None, dense_output=bool(events),
-                            first_step=first)
-            if sol.status < 0:
-                raise RuntimeError(f"solve_ivp ({self.method}) failed at t = {t:.9g} s: "
-                                   f"{sol.message}")
-            self.counts["solver_steps"] += len(sol.t) - 1
-            if len(sol.t) > 1:
-                self._first_step = float(sol.t[-1] - sol.t[-2]) or None
-            if sol.status == 0:
-                self.y = sol.y[:, -1].copy()
+            reached = self._integrate(t, t_end)
+            if reached[1] is None:
                 break
-            i = next(k for k, te in enumerate(sol.t_events) if len(te))
-            past = self._past_crossing(sol, i, t_end)
+            t_root, i, dense, t_before = reached
+            past = self._past_crossing(dense, t_before, t_root, i, t_end)
             if past is None:  # the far side lies beyond the step: the next step meets it
-                self.y = sol.sol(t_end)
+                self.y = dense(t_end)
                 break
             t, self.y = past  # the FMUs are there: _past_crossing evaluated that point last
             self.counts["state_events"] += 1
