@@ -268,7 +268,8 @@ class Master:
         extrapolated or through a source's newest point), made in the order the plan fixed once
         (rows_plan) into a plain dict: the lazy dict's lookups and bookkeeping cost
         about as much as the two FMI calls of a no-op step."""
-        rows_of, rows, newest = self.history.rows, {}, {}
+        rows_of, rows = self.history.rows, {}
+        newest: dict[str, list] = {}  # comp -> its outputs at t + h, once it has stepped
         end, outputs = t + h, self.system.outputs
         for (comp, gather, advance, read), make in zip(self._sweep_plan, self._sequential_rows):
             for src, interpolate in make:
