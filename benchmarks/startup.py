@@ -2,6 +2,8 @@
 
     python benchmarks/startup.py [--repeat 15] [--sweep] [--sweep-repeat 3]
 
+prints (a) and (c), and (b) with --sweep.
+
 (a) `crankfmu run scenarios/servo_press.toml --stop-time 0.002 --no-estimate` (2 steps: the run
 is nearly all start-up: interpreter, imports, the FMUs' loading) against
 `python -c "import fmpy, numpy"`, alternating, each a fresh process with its stderr on a
@@ -10,6 +12,11 @@ of CPU time (user + system of the child) and their ratios. Bytecode
 caching is on for both (PYTHONDONTWRITEBYTECODE removed from their environment) and one run of
 each comes first, untimed, so both find their caches warm (the FMUs built and unpacked, the
 .pyc files written); the FMU cache is the user's (crankfmu.fmu.archive).
+
+(c) the same 2-step run repeated in this process, as the Python API, a sweep's worker or the
+test suite repeat runs (the imports done, the FMUs unpacked): CPU per run (time.process_time)
+from loading the FMUs to the result, median and minimum over 3 x --repeat runs after one
+untimed.
 
 (b) with --sweep: benchmarks/sweep.py's 12 servo press runs of 3 s with --jobs 1 and --jobs 2,
 --sweep-repeat times (the ratio needs two free cores: see the load averages printed).
@@ -90,6 +97,25 @@ def part_a(repeat: int, folder: Path) -> None:
           f"load average {os.getloadavg()[0]:.2f} at end")
 
 
+def part_c(repeat: int) -> None:
+    sys.path.insert(0, str(ROOT / "sources"))
+    from crankfmu.cosim.runner import RunOptions, run_scene
+    from crankfmu.system.load import load_scene
+
+    scene = load_scene(ROOT / "scenarios" / "servo_press.toml")
+    scene.stop_time = scene.start_time + 0.002
+    options = RunOptions(out=None, fmu_dir=ROOT / "fmus", progress=False)
+    run_scene(scene, options)  # untimed: the first run imports and unpacks
+    cpu = []
+    for _ in range(3 * repeat):
+        start = time.process_time()
+        run_scene(scene, options)
+        cpu.append(time.process_time() - start)
+    print(f"(c) the 2-step run repeated in one process ({len(cpu)} runs): CPU per run median "
+          f"{statistics.median(cpu) * 1e3:.2f} ms, min {min(cpu) * 1e3:.2f} ms; load average "
+          f"{os.getloadavg()[0]:.2f}")
+
+
 def part_b(repeat: int) -> None:
     print(f"(b) load average {os.getloadavg()[0]:.2f} at start")
     subprocess.run([sys.executable, str(ROOT / "benchmarks" / "sweep.py"), "--stop-time", "3",
@@ -105,6 +131,7 @@ def main() -> int:
     import tempfile
     with tempfile.TemporaryDirectory(prefix="crankfmu-startup-") as tmp:
         part_a(args.repeat, Path(tmp))
+    part_c(args.repeat)
     if args.sweep:
         part_b(args.sweep_repeat)
     return 0
