@@ -41,6 +41,7 @@ def _child(script: str, args: list[str], cwd: str, env: dict, out: str, err: str
     os.chdir(cwd)
     os.environ.clear()
     os.environ.update(env)
+    tempfile.tempdir = None  # read from TMPDIR again at first use, as in a new interpreter
     sys.argv = ["-c", *args]
     sys.path.insert(0, cwd)
     for fd, path in ((1, out), (2, err)):
