@@ -64,6 +64,36 @@ def test_building_twice_gives_identical_files(tmp_path):
     assert first.read_bytes() == second.read_bytes()
 
 
+def test_builds_compile_each_bundled_module_once(tmp_path, monkeypatch):
+    """The bytecode an FMU carries is compiled once per module and process: the FMI 2.0 and 3.0
+    builds of a model share its runtime and model files, two FMI 2.0 builds pythonfmu's package
+    (before: each build compiled all of them again). And the build imports its bundle from that
+    bytecode (before: compiled from source a second time, for the import)."""
+    import importlib._bootstrap_external as ext
+
+    from crankfmu.fmu import bundle
+    from crankfmu.fmu.build_fmi3 import build_fmu3
+    compiled, imported = [], []
+    original_compile, original_source_to_code = compile, ext.SourceLoader.source_to_code
+
+    def recorded_compile(source, name, *args, **kwargs):
+        compiled.append((name, source))
+        return original_compile(source, name, *args, **kwargs)
+
+    def recorded_import(self, data, path, *, _optimize=-1):
+        imported.append(str(path))
+        return original_source_to_code(self, data, path, _optimize=_optimize)
+    monkeypatch.setattr(bundle, "compile", recorded_compile, raising=False)
+    monkeypatch.setattr(ext.SourceLoader, "source_to_code", recorded_import)
+    bundle._pyc.cache_clear()
+    build_fmu("DcServoMotor", tmp_path)
+    build_fmu("Rotor", tmp_path)
+    build_fmu3("DcServoMotor", tmp_path / "fmi3")
+    again = sorted({name for name, source in compiled if compiled.count((name, source)) > 1})
+    assert again == [] and len(compiled) > 40, again
+    assert [p for p in imported if "crankfmu_build_" in p] == []  # bundle_on_path's folder
+
+
 def test_a_build_after_a_run_in_the_same_process_carries_the_binaries(fmu_dir, tmp_path):
     """A run imports the FMU's own copy of pythonfmu (Python files only) as `pythonfmu`, and
     pythonfmu's builder copies the binaries found beside the imported package: a build in that
