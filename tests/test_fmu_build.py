@@ -15,6 +15,7 @@ from fmpy import read_model_description
 
 from crankfmu.fmu.build import build_fmu, validate
 from crankfmu.models.catalog import FMU_MODELS
+from tests.support import fresh_python
 
 MODELS = ("DcServoMotor", "StephensonPress")
 SERVO_PRESS = Path(__file__).resolve().parents[1] / "scenarios" / "servo_press.toml"
@@ -99,7 +100,8 @@ def test_a_build_after_a_run_in_the_same_process_carries_the_binaries(fmu_dir, t
     pythonfmu's builder copies the binaries found beside the imported package: a build in that
     process wrote an FMU without binaries (fmpy then failed with "Cannot find shared library";
     two tests of test_cli_options.py did so after another file's runs on the same xdist
-    worker). In a fresh interpreter: a run, then a build, whose FMU carries this platform's
+    worker). In a fresh interpreter (tests/support/fresh_python.py: crankfmu imported, nothing
+    run): a run, then a build, whose FMU carries this platform's
     binary and is the same file as a build in a process that ran nothing."""
     script = (
         "import sys, crankfmu\n"
@@ -108,8 +110,7 @@ def test_a_build_after_a_run_in_the_same_process_carries_the_binaries(fmu_dir, t
         f"crankfmu.simulate({str(SERVO_PRESS)!r}, stop_time=0.01, fmu_dir={str(fmu_dir)!r}, "
         "estimate=False)\n"
         f"build_fmu('DcServoMotor', Path({str(tmp_path / 'after_run')!r}))\n")
-    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                          timeout=120)
+    done = fresh_python.run(script, timeout=120)
     assert done.returncode == 0, done.stderr[-3000:]
     built = tmp_path / "after_run" / "DcServoMotor.fmu"
     with zipfile.ZipFile(built) as z:
@@ -154,10 +155,9 @@ def test_an_edit_to_one_model_changes_only_its_build_id(tmp_path, monkeypatch):
 
 # -- cached catalog FMUs (issue #27) -------------------------------------------------------------
 def _run_servo_press(fmus: Path, scene: Path = SERVO_PRESS) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "crankfmu", "run", str(scene),
-                           "--stop-time", "0.002", "--no-estimate", "--fmus", str(fmus),
-                           "--out", str(fmus / "run.csv")],
-                          capture_output=True, text=True, timeout=300)
+    """`crankfmu run` of `scene` in a fresh interpreter (tests/support/fresh_python.py)."""
+    return fresh_python.crankfmu(["run", scene, "--stop-time", "0.002", "--no-estimate",
+                                  "--fmus", fmus, "--out", fmus / "run.csv"], timeout=300)
 
 
 def _truncated(data: bytes) -> bytes:

@@ -10,8 +10,9 @@ descriptors 1 and 2 are the captured stdout and stderr (output of C code too), t
 is SystemExit's (1 after an uncaught exception, its traceback on stderr), and the atexit
 functions run at the end (crankfmu.fmu.archive removes its private folders there).
 
-What needs the interpreter's own start (its flags and environment read at start-up, signals, a
-command line as a user types it) runs with subprocess instead."""
+`crankfmu(ARGS...)`: `python -m crankfmu ARGS...` so (crankfmu/__main__.py run by runpy, as -m
+does). What needs the interpreter's own start (its flags and environment read at start-up, the
+signals it gets then, a command line as a user types it) runs with subprocess instead."""
 from __future__ import annotations
 
 import atexit
@@ -104,3 +105,10 @@ def run(script: str, args=(), cwd=None, env: dict | None = None,
     out, err = started.communicate(timeout)
     return subprocess.CompletedProcess(["python", "-c", script, *map(str, args)],
                                        started.returncode, out, err)
+
+
+def crankfmu(args, cwd=None, env: dict | None = None,
+             timeout: float | None = None) -> subprocess.CompletedProcess:
+    """`python -m crankfmu *args` run to its end (see the module docstring)."""
+    return run("import runpy\nrunpy.run_module('crankfmu', run_name='__main__', alter_sys=True)\n",
+               args, cwd, env, timeout)
