@@ -395,7 +395,11 @@ def cluster():
     # read at start: a run survives one worker death; a worker holds only the run it executes.
     # Read at each worker's start, so for the module: the nannies start their workers from a
     # forkserver that imported distributed (and numpy, ...) once, not each a fresh interpreter
-    # that imports them again (the two first and the three the kill tests restart).
+    # that imports them again (the two first and the three the kill tests restart). The
+    # process's one fork server, shared with tests/support/fresh_python.py: started here with
+    # the imports of both (else the first to start it decides).
+    from tests.support import fresh_python
+    fresh_python.start_server(("distributed",))
     with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}):
         with dask.config.set({"distributed.scheduler.allowed-failures": 1,
                               "distributed.scheduler.worker-saturation": 1.0}):

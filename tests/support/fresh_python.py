@@ -29,12 +29,21 @@ _context = multiprocessing.get_context("forkserver")
 _preload_set = False
 
 
-def _server():
+def _server(extra: tuple[str, ...] = ()):
     global _preload_set
     if not _preload_set:  # before the server starts (or it is already running: then as it is)
-        _context.set_forkserver_preload(PRELOAD)
+        _context.set_forkserver_preload([*PRELOAD, *extra])
         _preload_set = True
     return _context
+
+
+def start_server(extra: tuple[str, ...] = ()) -> None:
+    """Start this process's fork server now (if it is not running) with PRELOAD and `extra`
+    imported: for a user of the same server that needs more (a Dask LocalCluster whose
+    workers start from it: "distributed"), which then serves both."""
+    import multiprocessing.forkserver
+    _server(extra)
+    multiprocessing.forkserver.ensure_running()
 
 
 def _child(script: str, args: list[str], cwd: str, env: dict, out: str, err: str) -> None:
