@@ -63,9 +63,9 @@ def _child(script: str, args: list[str], cwd: str, env: dict, out: str, err: str
     status = 0
     try:
         exec(compile(script, "<string>", "exec"), {"__name__": "__main__"})
-    except SystemExit as stop:
-        status = stop.code if isinstance(stop.code, int) else (stop.code is not None)
-        if not isinstance(stop.code, int) and stop.code is not None:
+    except SystemExit as stop:  # as the interpreter: None 0, an int itself, else printed, 1
+        status = stop.code if isinstance(stop.code, int) else int(stop.code is not None)
+        if status and not isinstance(stop.code, int):
             print(stop.code, file=sys.stderr)
     except BaseException:  # noqa: BLE001 - as the interpreter: traceback, status 1
         traceback.print_exc()
