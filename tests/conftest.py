@@ -29,10 +29,18 @@ def pytest_configure(config) -> None:
 
 def pytest_unconfigure(config) -> None:
     import shutil
+    building = getattr(config, "_crankfmu_catalog_thread", None)
+    if building is not None:  # not removed while it is written
+        building.join()
     for folder in (getattr(config, "_crankfmu_cache", None),
                    getattr(config, "_crankfmu_catalog", None)):
         if folder:
             shutil.rmtree(folder, ignore_errors=True)
+
+
+# The controller's catalog: <a temporary folder>/fmus (its FMI 3.0 FMUs in fmus/fmi3/), and
+# beside fmus/, when the build is done, one of these files
+CATALOG_BUILT, CATALOG_FAILED = "built", "failed"
 
 
 def pytest_sessionstart(session) -> None:
@@ -43,31 +51,47 @@ def pytest_sessionstart(session) -> None:
     so readers are safe, but the work is done twice). It also builds the session's catalog
     (fmu_dir, fmi3_dir) once for every worker (each worker built its own: 4 s of CPU each),
     without fmpy validate: that is tests/test_fmu_build.py's, per FMU, on the workers (it is
-    1.4 of the build's 4.0 s of CPU, measured 2026-11-26, and here the workers wait for it).
-    Serially nothing changes: the first test that needs an FMU builds it."""
+    1.4 of the build's 4.0 s of CPU, measured 2026-11-26). The catalog is built in a thread
+    while the workers start and collect (they waited for it: 4 s on an idle machine, 7 s on a
+    loaded one); a worker's fmu_dir waits for the file CATALOG_BUILT (or CATALOG_FAILED, with
+    what the build said) beside it. Serially nothing changes: the first test that needs an FMU
+    builds it."""
     config = session.config
     if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
         return
-    import contextlib
-    import io
     import tempfile
+    import threading
 
-    from crankfmu.fmu.build import build_all, build_fmu, rebuild_reason
-    from crankfmu.fmu.build_fmi3 import build_all3
+    from crankfmu.fmu.build import build_fmu, rebuild_reason
     from crankfmu.models.catalog import FMU_MODELS
 
     for model in FMU_MODELS:
         if rebuild_reason(ROOT / "fmus" / f"{model}.fmu", model) is not None:  # as resolve_fmu
             build_fmu(model, ROOT / "fmus")
-    config._crankfmu_catalog = tempfile.mkdtemp(prefix="crankfmu-test-catalog-")
-    said = io.StringIO()  # a line per FMU, shown only if the build or a check fails
+    config._crankfmu_catalog = tempfile.mkdtemp(prefix="crankfmu-test-catalog-")  # fmus/ and
+    config._crankfmu_catalog_thread = threading.Thread(  # the markers; gone at unconfigure
+        target=_build_catalog, args=(Path(config._crankfmu_catalog),), daemon=True)
+    config._crankfmu_catalog_thread.start()
+
+
+def _build_catalog(root: Path) -> None:
+    """Every catalog model's FMI 2.0 and FMI 3.0 FMU into root/fmus (FMI 3.0 in its fmi3/, as
+    build_all and build_all3 without fmpy validate), then root/CATALOG_BUILT; CATALOG_FAILED
+    with the traceback if a build fails."""
+    import traceback
+
+    from crankfmu.fmu.build import build_fmu
+    from crankfmu.fmu.build_fmi3 import FMI3_DIR, build_fmu3
+    from crankfmu.models.catalog import FMU_MODELS
     try:
-        with contextlib.redirect_stdout(said):
-            build_all(Path(config._crankfmu_catalog), check=False)
-            build_all3(Path(config._crankfmu_catalog), check=False)
-    except BaseException:
-        print(said.getvalue())
-        raise
+        for model in FMU_MODELS:
+            build_fmu(model, root / "fmus")
+        for model in FMU_MODELS:
+            build_fmu3(model, root / "fmus" / FMI3_DIR)
+    except BaseException:  # noqa: BLE001 - said by every test that needs the catalog
+        (root / CATALOG_FAILED).write_text(traceback.format_exc())
+        return
+    (root / CATALOG_BUILT).touch()
 
 
 @pytest.hookimpl(optionalhook=True)
@@ -77,9 +101,20 @@ def pytest_configure_node(node) -> None:
 
 
 def _controller_catalog(config) -> Path | None:
-    """The controller's catalog (pytest_sessionstart) in an xdist worker, else None."""
+    """The controller's catalog (pytest_sessionstart) in an xdist worker once it is built (a
+    failed build fails the test that asked, with the build's traceback), else None."""
+    import time
+
     built = getattr(config, "workerinput", {}).get("crankfmu_catalog")
-    return Path(built) if built else None
+    if not built:
+        return None
+    root = Path(built)
+    while not (root / CATALOG_BUILT).exists():
+        if (root / CATALOG_FAILED).exists():
+            pytest.fail("the controller's build of the session's FMU catalog failed:\n"
+                        + (root / CATALOG_FAILED).read_text(), pytrace=False)
+        time.sleep(0.05)
+    return root / "fmus"
 
 
 @pytest.fixture(scope="session")

@@ -83,15 +83,15 @@ def pid_and_worker_folder() -> tuple[int, str]:
 
 
 def run_pool_script(script: str, tmp: Path, start_method: str):
-    """Run `script` in a fresh interpreter from the project's root, its temporary folders in
-    `tmp`, its pools' workers started by `start_method`; it must succeed."""
+    """Run `script` in a fresh interpreter from the project's root (tests/support/fresh_python.py:
+    its imports done, nothing else), its temporary folders in `tmp`, its pools' workers started
+    by `start_method`; it must succeed."""
     import os
-    import subprocess
 
     from tests.conftest import ROOT
-    done = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True,
-                          text=True, timeout=120, env={**os.environ, "TMPDIR": str(tmp),
-                                                       "CRANKFMU_START_METHOD": start_method})
+    from tests.support import fresh_python
+    done = fresh_python.run(script, cwd=ROOT, timeout=120, env={
+        **os.environ, "TMPDIR": str(tmp), "CRANKFMU_START_METHOD": start_method})
     assert done.returncode == 0, done.stderr[-3000:]
     return done
 

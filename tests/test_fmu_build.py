@@ -15,6 +15,7 @@ from fmpy import read_model_description
 
 from crankfmu.fmu.build import build_fmu, validate
 from crankfmu.models.catalog import FMU_MODELS
+from tests.support import fresh_python
 
 MODELS = ("DcServoMotor", "StephensonPress")
 SERVO_PRESS = Path(__file__).resolve().parents[1] / "scenarios" / "servo_press.toml"
@@ -64,12 +65,43 @@ def test_building_twice_gives_identical_files(tmp_path):
     assert first.read_bytes() == second.read_bytes()
 
 
+def test_builds_compile_each_bundled_module_once(tmp_path, monkeypatch):
+    """The bytecode an FMU carries is compiled once per module and process: the FMI 2.0 and 3.0
+    builds of a model share its runtime and model files, two FMI 2.0 builds pythonfmu's package
+    (before: each build compiled all of them again). And the build imports its bundle from that
+    bytecode (before: compiled from source a second time, for the import)."""
+    import importlib._bootstrap_external as ext
+
+    from crankfmu.fmu import bundle
+    from crankfmu.fmu.build_fmi3 import build_fmu3
+    compiled, imported = [], []
+    original_compile, original_source_to_code = compile, ext.SourceLoader.source_to_code
+
+    def recorded_compile(source, name, *args, **kwargs):
+        compiled.append((name, source))
+        return original_compile(source, name, *args, **kwargs)
+
+    def recorded_import(self, data, path, *, _optimize=-1):
+        imported.append(str(path))
+        return original_source_to_code(self, data, path, _optimize=_optimize)
+    monkeypatch.setattr(bundle, "compile", recorded_compile, raising=False)
+    monkeypatch.setattr(ext.SourceLoader, "source_to_code", recorded_import)
+    bundle._pyc.cache_clear()
+    build_fmu("DcServoMotor", tmp_path)
+    build_fmu("Rotor", tmp_path)
+    build_fmu3("DcServoMotor", tmp_path / "fmi3")
+    again = sorted({name for name, source in compiled if compiled.count((name, source)) > 1})
+    assert again == [] and len(compiled) > 40, again
+    assert [p for p in imported if "crankfmu_build_" in p] == []  # bundle_on_path's folder
+
+
 def test_a_build_after_a_run_in_the_same_process_carries_the_binaries(fmu_dir, tmp_path):
     """A run imports the FMU's own copy of pythonfmu (Python files only) as `pythonfmu`, and
     pythonfmu's builder copies the binaries found beside the imported package: a build in that
     process wrote an FMU without binaries (fmpy then failed with "Cannot find shared library";
     two tests of test_cli_options.py did so after another file's runs on the same xdist
-    worker). In a fresh interpreter: a run, then a build, whose FMU carries this platform's
+    worker). In a fresh interpreter (tests/support/fresh_python.py: crankfmu imported, nothing
+    run): a run, then a build, whose FMU carries this platform's
     binary and is the same file as a build in a process that ran nothing."""
     script = (
         "import sys, crankfmu\n"
@@ -78,8 +110,7 @@ def test_a_build_after_a_run_in_the_same_process_carries_the_binaries(fmu_dir, t
         f"crankfmu.simulate({str(SERVO_PRESS)!r}, stop_time=0.01, fmu_dir={str(fmu_dir)!r}, "
         "estimate=False)\n"
         f"build_fmu('DcServoMotor', Path({str(tmp_path / 'after_run')!r}))\n")
-    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                          timeout=120)
+    done = fresh_python.run(script, timeout=120)
     assert done.returncode == 0, done.stderr[-3000:]
     built = tmp_path / "after_run" / "DcServoMotor.fmu"
     with zipfile.ZipFile(built) as z:
@@ -124,10 +155,9 @@ def test_an_edit_to_one_model_changes_only_its_build_id(tmp_path, monkeypatch):
 
 # -- cached catalog FMUs (issue #27) -------------------------------------------------------------
 def _run_servo_press(fmus: Path, scene: Path = SERVO_PRESS) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "crankfmu", "run", str(scene),
-                           "--stop-time", "0.002", "--no-estimate", "--fmus", str(fmus),
-                           "--out", str(fmus / "run.csv")],
-                          capture_output=True, text=True, timeout=300)
+    """`crankfmu run` of `scene` in a fresh interpreter (tests/support/fresh_python.py)."""
+    return fresh_python.crankfmu(["run", scene, "--stop-time", "0.002", "--no-estimate",
+                                  "--fmus", fmus, "--out", fmus / "run.csv"], timeout=300)
 
 
 def _truncated(data: bytes) -> bytes:

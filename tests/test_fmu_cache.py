@@ -1,14 +1,15 @@
 """The per-user cache FMUs are unpacked into (crankfmu.fmu.archive): one folder per FMU content,
 used by every later process, never stale, never half-written, safe for processes that unpack
-at once. Each case loads FMUs in fresh processes (a process unpacks a content once)."""
+at once. Each case loads FMUs in fresh processes (a process unpacks a content once; started as
+tests/support/fresh_python.py says, with the imports done, no FMU loaded)."""
 from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
 import zipfile
 from pathlib import Path
+
+from tests.support import fresh_python
 
 ROOT = Path(__file__).resolve().parents[1]
 # Load the FMU, step it once after initialization, print where it was unpacked and flange_J.
@@ -27,13 +28,12 @@ print(json.dumps({"folder": fmu.unzip_dir, "flange_J": value}))
 """
 
 
-def load(fmu: Path, cache: Path | str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-c", LOAD, str(fmu)], cwd=ROOT, text=True,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            env={**os.environ, "CRANKFMU_CACHE_DIR": str(cache)})
+def load(fmu: Path, cache: Path | str) -> fresh_python.Started:
+    return fresh_python.start(LOAD, [fmu], cwd=ROOT,
+                              env={**os.environ, "CRANKFMU_CACHE_DIR": str(cache)})
 
 
-def loaded(process: subprocess.Popen) -> dict:
+def loaded(process: fresh_python.Started) -> dict:
     out, err = process.communicate(timeout=120)
     assert process.returncode == 0, err[-3000:]
     return json.loads(out.splitlines()[-1])

@@ -30,6 +30,7 @@ from crankfmu.system.load import load_scene
 from crankfmu.system.scene import apply_overrides
 
 from tests.conftest import ROOT, SCENARIOS
+from tests.support import fresh_python
 from tests.support.full import quick_or_full
 from tests.support.fuzz.scenes import LOOP
 
@@ -83,8 +84,8 @@ def refused(path, key: str, words: str) -> SceneError:
 
 
 def run_cli(*args, env=None, cwd=ROOT, timeout=120):
-    return subprocess.run([sys.executable, "-m", "crankfmu", *map(str, args)], cwd=cwd,
-                          capture_output=True, text=True, timeout=timeout, env=env)
+    """`python -m crankfmu ARGS` in a fresh interpreter (tests/support/fresh_python.py)."""
+    return fresh_python.crankfmu(args, cwd=cwd, env=env, timeout=timeout)
 
 
 # -- security ------------------------------------------------------------------------------------
@@ -636,9 +637,9 @@ def test_a_huge_sweep_grid_is_refused_before_it_is_made(tmp_path):
             "from crankfmu.cli import main\n"
             "sys.exit(main(sys.argv[1:]))\n")
     start = time.monotonic()
-    done = subprocess.run([sys.executable, "-c", code, "sweep", str(SCENARIOS / "servo_press.toml"),
-                           "--vary", "press.F_max=0:1:100000000", "--out", str(tmp_path / "s")],
-                          cwd=ROOT, capture_output=True, text=True, timeout=120)
+    done = fresh_python.run(code, ["sweep", SCENARIOS / "servo_press.toml", "--vary",
+                                   "press.F_max=0:1:100000000", "--out", tmp_path / "s"],
+                            cwd=ROOT, timeout=120)
     assert done.returncode == 2, done.stderr[-2000:]
     assert "--vary press.F_max: N = 100000000 points; allowed 1 to 10000" in done.stderr
     assert time.monotonic() - start < 60 and not (tmp_path / "s").exists()

@@ -131,3 +131,59 @@ def test_launcher_compile_is_deterministic():
         first = launcher._compile(tuple(launcher.find_compiler()), sources)
         launcher._compile.cache_clear()
         assert launcher._compile(tuple(launcher.find_compiler()), sources) == first
+
+
+def test_a_compiled_launcher_is_kept_for_later_processes_of_the_same_compiler(
+        tmp_path, monkeypatch):
+    """A build in a later process takes the launcher from the per-user cache folder instead of
+    compiling it again (here: the in-process cache cleared, and the compiler made to fail);
+    other sources, or a compiler that says it is another version, compile again. Without a
+    private cache folder nothing is kept."""
+    from crankfmu.fmu import archive, launcher
+
+    if launcher.find_compiler() is None:
+        pytest.skip("no C compiler")
+    monkeypatch.setenv(archive.CACHE_ENV, str(tmp_path))
+    launcher._compile_kept.cache_clear()
+    first = launcher.compile_launcher(2)
+    kept = [p.name for p in tmp_path.iterdir()]
+    assert len(kept) == 1 and kept[0].startswith("launcher-") and kept[0].endswith(".so")
+    assert (tmp_path / kept[0]).read_bytes() == first
+
+    def compiled_again(*args):
+        raise AssertionError("compiled again")
+    monkeypatch.setattr(launcher, "_compile", compiled_again)
+
+    def later_process(version: int) -> bytes:
+        launcher._compile_kept.cache_clear()
+        return launcher.compile_launcher(version)
+    assert later_process(2) == first
+    with pytest.raises(AssertionError, match="compiled again"):
+        later_process(3)  # other sources
+    monkeypatch.setattr(launcher, "_compiler_identity", lambda compiler: "cc (Other) 99.1\n")
+    with pytest.raises(AssertionError, match="compiled again"):
+        later_process(2)
+    monkeypatch.undo()
+    monkeypatch.setenv(archive.CACHE_ENV, "")  # no cache folder: compiled in each process
+    monkeypatch.setattr(launcher, "_compile", compiled_again)
+    with pytest.raises(AssertionError, match="compiled again"):
+        later_process(2)
+    launcher._compile_kept.cache_clear()  # nothing of this test's stays for the next
+
+
+def test_kept_launchers_are_removed_with_the_cache_folders_unused_fmus(tmp_path):
+    """A kept launcher is removed CACHE_KEEP_SECONDS after it was compiled (it is compiled
+    again at the next build), one left half written after an hour; newer ones stay."""
+    import os
+    import time
+
+    from crankfmu.fmu import archive
+    now = time.time()
+    ages = {"launcher-old.so": archive.CACHE_KEEP_SECONDS + 60, "launcher-new.so": 60,
+            ".launcher-new.so.x.part": 3600 + 60, ".launcher-new.so.y.part": 60}
+    for name, age in ages.items():
+        (tmp_path / name).write_bytes(b"\x7fELF")
+        os.utime(tmp_path / name, (now - age, now - age))
+    archive._evict(tmp_path, keep=tmp_path / "in-use")
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".launcher-new.so.y.part",
+                                                          "launcher-new.so"]

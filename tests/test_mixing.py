@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import subprocess
-import sys
 import zipfile
 from pathlib import Path
 
@@ -23,6 +21,7 @@ from fmpy import read_model_description
 
 from crankfmu.fmu import build
 from crankfmu.models.catalog import FMU_MODELS
+from tests.support import fresh_python
 from tests.support.importer_support import step_in_process, step_together
 
 TESTS = Path(__file__).resolve().parent
@@ -59,8 +58,9 @@ def build_from_copy(tmp: Path, dest: Path, build_id: str | None = None) -> Path:
 
 
 def run_in_fresh_process(fmus: list[tuple[str, Path]]) -> dict:
-    """Load the FMUs in this order in a new interpreter, then step those that loaded; last
-    outputs, the runtime packages it imported, and the refusals (name -> message)."""
+    """Load the FMUs in this order in a new interpreter (tests/support/fresh_python.py: no FMU
+    loaded before), then step those that loaded; last outputs, the runtime packages it
+    imported, and the refusals (name -> message)."""
     script = (
         "import json, sys\n"
         "from crankfmu.fmu.archive import FmuRefused\n"
@@ -77,10 +77,8 @@ def run_in_fresh_process(fmus: list[tuple[str, Path]]) -> dict:
         "out = {n: dict(zip(names, rows[-1, 1:].tolist())) for n, (names, rows) in res.items()}\n"
         "rt = sorted(m for m in sys.modules if m.startswith('crankfmu_rt_') and '.' not in m)\n"
         "print(json.dumps({'outputs': out, 'runtimes': rt, 'refused': refused}))\n")
-    done = subprocess.run([sys.executable, "-c", script,
-                           json.dumps([(n, str(p)) for n, p in fmus])],
-                          capture_output=True, text=True, timeout=120,
-                          cwd=TESTS.parent)  # `python -c` puts the working folder first: tests.*
+    done = fresh_python.run(script, [json.dumps([(n, str(p)) for n, p in fmus])], timeout=120,
+                            cwd=TESTS.parent)  # `python -c` puts the working folder first: tests.*
     assert done.returncode == 0, done.stderr[-3000:]
     return json.loads(done.stdout.splitlines()[-1])
 

@@ -392,14 +392,22 @@ def test_latin_hypercube_sweep(tmp_path, rotor_fmu_dir, one_worker):
 def cluster():
     distributed = pytest.importorskip("distributed")
     import dask
-    # read at start: a run survives one worker death; a worker holds only the run it executes
-    with dask.config.set({"distributed.scheduler.allowed-failures": 1,
-                          "distributed.scheduler.worker-saturation": 1.0}):
-        lc = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                      host="127.0.0.1", dashboard_address=None)
-    with lc:
-        with distributed.Client(lc) as client:
-            yield client
+    # read at start: a run survives one worker death; a worker holds only the run it executes.
+    # Read at each worker's start, so for the module: the nannies start their workers from a
+    # forkserver that imported distributed (and numpy, ...) once, not each a fresh interpreter
+    # that imports them again (the two first and the three the kill tests restart). The
+    # process's one fork server, shared with tests/support/fresh_python.py: started here with
+    # the imports of both (else the first to start it decides).
+    from tests.support import fresh_python
+    fresh_python.start_server(("distributed",))
+    with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}):
+        with dask.config.set({"distributed.scheduler.allowed-failures": 1,
+                              "distributed.scheduler.worker-saturation": 1.0}):
+            lc = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                          host="127.0.0.1", dashboard_address=None)
+        with lc:
+            with distributed.Client(lc) as client:
+                yield client
 
 
 def test_dask_cluster_equals_serial(tmp_path, rotor_fmu_dir, serial_table, cluster):

@@ -20,6 +20,7 @@ run.
 from __future__ import annotations
 
 import atexit
+import contextlib
 import errno
 import hashlib
 import io
@@ -280,16 +281,22 @@ def _touch(folder: str) -> None:
 
 def _evict(root: Path, keep: Path) -> None:
     """Remove cached FMUs unused for CACHE_KEEP_SECONDS and unpacking folders left for an hour
-    (a process killed while unpacking)."""
+    (a process killed while unpacking); the compiled launchers kept here
+    (crankfmu.fmu.launcher) CACHE_KEEP_SECONDS after they were compiled, and one left half
+    written after an hour."""
     now = time.time()
     for entry in os.scandir(root):
         try:
             age = now - entry.stat(follow_symlinks=False).st_mtime
         except OSError:
             continue
-        stale = CACHE_KEEP_SECONDS if not entry.name.startswith(PART_PREFIX) else 3600
+        stale = CACHE_KEEP_SECONDS if not entry.name.startswith((PART_PREFIX, ".launcher-")) \
+            else 3600
         if entry.is_dir(follow_symlinks=False) and entry.path != str(keep) and age > stale:
             shutil.rmtree(entry.path, ignore_errors=True)
+        elif entry.name.startswith(("launcher-", ".launcher-")) and age > stale:
+            with contextlib.suppress(OSError):
+                os.unlink(entry.path)
 
 
 def load_fmu(path: Path) -> tuple[str, Any]:

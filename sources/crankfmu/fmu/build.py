@@ -149,12 +149,17 @@ def current_build_id(model_name: str) -> str:
 
 def write_bundle(dest: Path, marked: dict[str, bytes], digest: str) -> tuple[Path, Path]:
     """The bundle rendered with `digest` into `dest` (but what pythonfmu's builder writes:
-    slavemodule.txt and the library's package); returns (package folder, entry script)."""
+    slavemodule.txt and the library's package), with its checked-hash bytecode (bundle.bytecode:
+    what the FMU carries): the build imports it without compiling it a second time; returns
+    (package folder, entry script)."""
+    from .bundle import bytecode
+
     rendered = render(marked, digest)
-    for name, data in rendered.items():
-        if name != SLAVE_MODULE and not name.startswith(LIBRARY_FOLDERS):
-            (dest / name).parent.mkdir(parents=True, exist_ok=True)
-            (dest / name).write_bytes(data)
+    written = {name: data for name, data in rendered.items()
+               if name != SLAVE_MODULE and not name.startswith(LIBRARY_FOLDERS)}
+    for name, data in {**written, **bytecode(written)}.items():
+        (dest / name).parent.mkdir(parents=True, exist_ok=True)
+        (dest / name).write_bytes(data)
     return dest / package_name(digest), dest / f"{rendered[SLAVE_MODULE].decode()}.py"
 
 

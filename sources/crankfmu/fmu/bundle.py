@@ -21,6 +21,7 @@ forged bytecode.)
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import importlib.util
 import marshal
@@ -93,11 +94,20 @@ def bytecode(files: dict[str, bytes]) -> dict[str, bytes]:
         path = PurePosixPath(name)
         if path.suffix != ".py" or _is_bytecode(name):
             continue
-        code = compile(source, name, "exec", dont_inherit=True, optimize=0)  # the plain .pyc
-        header = importlib.util.MAGIC_NUMBER + (0b11).to_bytes(4, "little")  # hash, checked
         pyc = path.parent / "__pycache__" / f"{path.stem}.{sys.implementation.cache_tag}.pyc"
-        out[str(pyc)] = header + importlib.util.source_hash(source) + marshal.dumps(code, 2)
+        out[str(pyc)] = _pyc(name, source)
     return out
+
+
+@functools.lru_cache(maxsize=512)
+def _pyc(name: str, source: bytes) -> bytes:
+    """The checked-hash pyc of module `name` (its path in the bundle) with `source`, compiled
+    once per process: builds share modules (the library's package in every FMU of an FMI
+    version, a model's files in its FMI 2.0 and 3.0 FMUs): the catalog's 18 FMUs compile 507
+    modules, 291 of them distinct (measured 2026-11-26)."""
+    code = compile(source, name, "exec", dont_inherit=True, optimize=0)  # the plain .pyc
+    header = importlib.util.MAGIC_NUMBER + (0b11).to_bytes(4, "little")  # hash, checked
+    return header + importlib.util.source_hash(source) + marshal.dumps(code, 2)
 
 
 @dataclass(frozen=True)

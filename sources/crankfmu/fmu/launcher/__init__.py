@@ -106,7 +106,52 @@ def compile_launcher(fmi_version: int = 2) -> bytes | None:
               "interpreter themselves; native hosts (ecos CLI, OMSimulator, Dymola, cosim) "
               "crash on load. Install a C compiler and build again.", file=sys.stderr)
         return None
-    return _compile(tuple(compiler), sources(fmi_version))
+    return _compile_kept(tuple(compiler), sources(fmi_version))
+
+
+def _compiler_identity(compiler: tuple[str, ...]) -> str | None:
+    """What the compiler says it is (`--version`: name, version, target), or None if it says
+    nothing (then its output is not kept)."""
+    import subprocess
+    try:
+        done = subprocess.run([*compiler, "--version"], capture_output=True, text=True,
+                              timeout=60)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return done.stdout if done.returncode == 0 and done.stdout.strip() else None
+
+
+@functools.lru_cache(maxsize=8)
+def _compile_kept(compiler: tuple[str, ...], files: tuple[tuple[str, bytes], ...]) -> bytes:
+    """_compile's bytes, kept in the per-user cache folder (crankfmu.fmu.archive.cache_dir) as
+    launcher-<key>.so, key = a hash of the compiler's command and identity, FLAGS and the
+    sources: a later process that builds an FMU (a stale FMU rebuilt by `crankfmu run`, each
+    `python build.py`) reads it instead of compiling again (0.4 s of CPU a compile, 0.005 s
+    asking the compiler its version; measured 2026-11-26). The compile is deterministic (the
+    module's docstring), so the kept bytes are what a compile gives; they are written whole
+    (a temporary file renamed) and only into a folder that is this user's alone."""
+    import hashlib
+    import tempfile
+
+    from ..archive import cache_dir
+    root, identity = cache_dir(), _compiler_identity(compiler)
+    if root is None or identity is None:
+        return _compile(compiler, files)
+    key = hashlib.sha256(repr((compiler, identity, FLAGS, files)).encode()).hexdigest()[:32]
+    kept = root / f"launcher-{key}.so"
+    try:
+        return kept.read_bytes()
+    except OSError:  # not kept yet
+        pass
+    compiled = _compile(compiler, files)
+    fd, part = tempfile.mkstemp(prefix=f".{kept.name}.", suffix=".part", dir=root)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(compiled)
+        os.replace(part, kept)
+    except OSError:  # not kept: the next process compiles again
+        Path(part).unlink(missing_ok=True)
+    return compiled
 
 
 def python_version() -> str:
