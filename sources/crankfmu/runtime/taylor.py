@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import functools
 import math
-from fractions import Fraction
 from typing import Callable, Sequence
 
 DIFFERENCE_FRACTION = 1e-3  # node spacing of the differences, x the communication step
@@ -119,7 +118,10 @@ def moved_rows(rows: Rows, s: float) -> Rows:
 def forward_weights(order: int, nodes: int) -> tuple[float, ...]:
     """Weights w_j such that sum_j w_j g(j delta) / delta^order is the order-th derivative of
     g at 0 (the derivative of the polynomial interpolating g at j = 0 .. nodes - 1), exact for
-    polynomials of degree < nodes. From the Lagrange basis, in exact fractions."""
+    polynomials of degree < nodes. From the Lagrange basis, in exact fractions (made when an
+    order is first asked for: the fractions for every order cost 3 ms, in every FMU's start)."""
+    from fractions import Fraction
+
     weights = []
     for j in range(nodes):
         poly = [Fraction(1)]  # prod_{m != j} (s - m) / (j - m), lowest power first
@@ -158,7 +160,7 @@ def state_rows(f: Callable, t: float, x: Sequence[float], u_rows: Rows, order: i
     if len(rows) < 2:
         rows.append(list(f(t, rows[0], u(t))))
     for k in range(len(rows) - 1, order):  # rows[k + 1]: the k-th difference of f
-        weights, at_zero = _WEIGHTS[k], rows[1]
+        weights, at_zero = forward_weights(k, k + 1), rows[1]  # the k-th difference
         total = [0.0] * len(at_zero)
         for j in range(1, k + 1):
             s = j * delta
@@ -173,9 +175,6 @@ def state_rows(f: Callable, t: float, x: Sequence[float], u_rows: Rows, order: i
         rows.append([scale * v for v in total])
     return rows
 
-
-# the k-th difference on k + 1 nodes, for every order a state row can ask
-_WEIGHTS = [forward_weights(k, k + 1) for k in range(8)]
 
 
 class AffineOutputs:
