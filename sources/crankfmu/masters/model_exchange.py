@@ -7,13 +7,13 @@ order their direct feedthrough needs: `evaluation_plan`) and the derivatives rea
 is exact, as in the monolithic reference (monolithic/composed.py), but through the FMUs: it is the
 solution a co-simulation approaches as its step goes to zero, computed with the FMUs themselves.
 
-scipy's DOP853 (or Radau) integrates the states with every FMU's event indicators as terminal
-events, located as solve_ivp locates them (a sign change over a solver step, the root by Brent's
-method on that step's dense output). The master drives the solver's steps itself: one solver goes
-on over the communication steps (the runner's grid; a step that crosses an edge of a step-table
-input ends there) with steps of its own length (10 ms and more on the servo press, whose grid is
-1 ms; a solver per communication step, as solve_ivp would be, took two steps in each), the state
-at a communication point from the dense output of the step that contains it, until an event (or a
+scipy's DOP853 (or Radau) integrates over each communication step (the runner's grid; a step
+that crosses an edge of a step-table input ends there) with every FMU's event indicators as
+terminal events, located as solve_ivp locates them (a sign change over a solver step, the root by
+Brent's method on that step's dense output). The master drives the solver's steps itself rather
+than calling solve_ivp per communication step: one solver goes on over the communication steps
+with steps of its own length (10 ms and more on the servo press, whose grid is 1 ms), the state at
+a communication point from the dense output of the step that contains it, until an event (or a
 crossing beyond the communication step: the next one starts a new solver there, and meets it).
 At a zero crossing the master takes the first point past it on the solver's dense output
 (the FMU sees the indicator's new sign, as FMI asks), gives every FMU that point, and runs the
