@@ -280,6 +280,20 @@ def test_planetary_lock_and_break_free_times_as_model_exchange(name, events):
         assert abs(run[figure][-1] - ref[figure][-1]) < 1e-6, figure
 
 
+def test_model_exchange_meets_a_lock_and_release_two_milliseconds_apart():
+    """The clutch hammer's brakes lock and let go again within 2 ms near 1.15 s (the drive's
+    event counter steps twice there in the reference). A master that let its solver take steps
+    across communication points (10 ms and more on this scene) saw the same indicator sign at
+    both ends of such a step and lost both events (8 events to 1.6 s against the reference's 10):
+    the model-exchange run must count, to 1.16 s, every event the reference counts, each within
+    1 ms of the reference's (the record grid)."""
+    ref, run, _ = _reference_and_run("clutch_hammer", stop_time=1.16, step=1e-3)
+    n_ref, n_run = ref["drive.n_events"], run["drive.n_events"]
+    assert n_ref[-1] >= 9 and n_run[-1] == n_ref[-1], (n_run[-1], n_ref[-1])
+    steps_run, steps_ref = np.flatnonzero(np.diff(n_run)), np.flatnonzero(np.diff(n_ref))
+    assert np.max(np.abs(steps_run - steps_ref)) <= 1, (steps_run, steps_ref)
+
+
 def test_model_exchange_master_refuses_an_fmi2_file(tmp_path, fmu_dir):
     """An FMU file without Model Exchange (pythonfmu's FMI 2.0): a clear error naming it."""
     import crankfmu
