@@ -323,7 +323,7 @@ class ModelExchange(Master):
         first = None if self._first_step is None else min(self._first_step, t_end - t)
         solver = {"DOP853": DOP853, "Radau": Radau}[self.method](
             self.rhs, t, self.y, t_end, rtol=self.rtol, atol=self.atol, first_step=first)
-        g = values(t, self.y) if values else None
+        g = values(t, self.y) if values else np.empty(0)  # the indicators at the step's start
         while solver.status == "running":
             proposed, t_old = solver.h_abs, solver.t
             message = solver.step()
