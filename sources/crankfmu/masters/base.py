@@ -255,8 +255,7 @@ class Master:
         if not start_rows:
             return self._planned_sequential_sweep(t, h, order)
         coefficients = Coefficients(self.history, t, order)
-        if start_rows:
-            coefficients.update(start_rows)
+        coefficients.update(start_rows)
         end, outputs, reached = t + h, self.system.outputs, coefficients.reached
         for comp, gather, advance, read in self._sweep_plan:
             advance(t, h, gather(coefficients))
