@@ -126,13 +126,12 @@ class History:
         times, values = self.times, self.values
         k = min(order + (newest is None), len(times))  # points taken from the history
         if newest is None:
+            newest_values = values[-1][comp]
             if k == 1:
-                return [values[-1][comp]]
+                return [newest_values]
             if k == 2:
-                newest_values = values[-1][comp]
                 return _LINES[len(newest_values)](times[-1] - t, times[-2] - t, newest_values,
                                                   values[-2][comp])
-            newest_values = values[-1][comp]
             return _PARABOLAS[len(newest_values)](times[-1] - t, times[-2] - t, times[-3] - t,
                                                   newest_values, values[-2][comp],
                                                   values[-3][comp])

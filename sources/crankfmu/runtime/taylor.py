@@ -176,7 +176,6 @@ def state_rows(f: Callable, t: float, x: Sequence[float], u_rows: Rows, order: i
     return rows
 
 
-
 class AffineOutputs:
     """y = g(0, 0) + C x + D u for the outputs at `indices` of output_values(t, x, u), affine in
     x and u: the nonzero entries of C and D, read off at the unit vectors."""
