@@ -251,6 +251,28 @@ def test_a_pool_from_a_script_without_a_main_guard_says_what_to_do(tmp_path, fmu
     last = done.stderr.strip().splitlines()[-1]
     assert last.startswith("crankfmu.cosim.companions.WorkerStartError: ") and \
         'if __name__ == "__main__":' in last, done.stderr[-2000:]
+    assert "leaked semaphore" not in done.stderr
+
+
+@pytest.mark.parametrize("start", ["executor", "companions"])
+def test_a_worker_importing_the_script_makes_no_pool(monkeypatch, start):
+    """In a spawned worker still importing the script (multiprocessing marks it `_inheriting`)
+    crankfmu raises WorkerStartError before it makes a pool. Before, it made one (its
+    semaphores registered with the resource tracker) and failed as the pool started a worker:
+    under load the tracker's "leaked semaphore" warning came after the parent's error, the last
+    line of the test above (it failed so twice in a row in the suite)."""
+    import multiprocessing
+
+    from crankfmu.cosim import workers
+    from crankfmu.cosim.companions import Companions, WorkerStartError
+    from crankfmu.studies.executor import LocalPoolExecutor
+
+    def new_pool(*args, **kwargs):
+        raise AssertionError("a pool was made")
+    monkeypatch.setattr(workers, "new_pool", new_pool)
+    monkeypatch.setattr(multiprocessing.current_process(), "_inheriting", True, raising=False)
+    with pytest.raises(WorkerStartError, match="__main__"):
+        LocalPoolExecutor(2) if start == "executor" else Companions(2)
 
 
 def test_the_api_functions_stay_whatever_is_imported():

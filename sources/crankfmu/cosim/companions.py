@@ -47,16 +47,24 @@ class WorkerStartError(CrankfmuError, RuntimeError):
 
 @contextlib.contextmanager
 def guarded_start():
-    """Around the call that starts worker processes: multiprocessing's RuntimeError for a
-    process started while a spawned worker is still importing the script (the script's body
-    ran again in the worker, without a main guard) becomes a WorkerStartError saying so."""
+    """Around the calls that make a pool and start its worker processes: in a spawned worker
+    still importing the script (the script's body ran again there, without a main guard) it
+    raises WorkerStartError saying so, before the pool is made. Made there, the pool's
+    semaphores outlived the worker, and the resource tracker's warning about them could come
+    after the parent's error, as the last line a user reads. multiprocessing's own RuntimeError
+    for that case becomes the same WorkerStartError."""
+    import multiprocessing  # here: a run without workers does not import it
+    error = WorkerStartError(f"crankfmu was called while a worker process imported the "
+                             f"script: {MAIN_GUARD}")
+    # spawn's own test (multiprocessing.spawn._check_not_importing_main)
+    if getattr(multiprocessing.current_process(), "_inheriting", False):
+        raise error
     try:
         yield
     except RuntimeError as err:
         if "bootstrapping phase" not in str(err):
             raise
-        raise WorkerStartError(f"crankfmu was called while a worker process imported the "
-                               f"script: {MAIN_GUARD}") from None
+        raise error from None
 
 
 def processes(jobs: int) -> int:
@@ -112,8 +120,8 @@ class Companions:
         self._lifeline: Lifeline | None = None
         if self.jobs > 1:  # multiprocessing imported here: a run without workers skips it
             from .workers import new_pool, ready
-            self._pool, self._lifeline = new_pool(self.jobs - 1)
             with guarded_start():  # start the workers now, while the parent loads the FMUs
+                self._pool, self._lifeline = new_pool(self.jobs - 1)
                 self._started = self._pool.submit(ready)
 
     def submit(self, run, *args) -> Pending:

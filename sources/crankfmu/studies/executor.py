@@ -338,8 +338,8 @@ class LocalPoolExecutor(Executor):
     def _new_pool(self):
         from ..cosim.companions import guarded_start
         from ..cosim.workers import new_pool, ready
-        pool, self._lifeline = new_pool(self.jobs)
         with guarded_start():  # each submit to a pool without an idle worker starts one
+            pool, self._lifeline = new_pool(self.jobs)
             self._started = [pool.submit(ready) for _ in range(self.jobs)]
         return pool
 
