@@ -70,26 +70,35 @@ def test_compare_on_a_pool_equals_serial(fmu_dir, tmp_path):
         assert (tmp_path / "serial" / name).read_bytes() == (tmp_path / "pool" / name).read_bytes()
 
 
-def pid_and_worker_folder() -> tuple[int, str]:
-    """In a pool worker: its pid and its temporary folder (made now), after a pause so that
-    each of two such tasks lands on its own worker."""
+def pid_and_worker_folder(meeting: str) -> tuple[int, str]:
+    """In a pool worker: its pid and its temporary folder (made now), once two such tasks have
+    started (each leaves its pid in the folder `meeting`): the one that started first holds its
+    worker until the other has taken the second, so each of two such tasks runs on its own
+    worker (before: a fixed 1 s pause, which mostly did the same)."""
     import os
     import time
 
     from crankfmu.cosim.workers import worker_dir
     folder = str(worker_dir())
-    time.sleep(1.0)
+    Path(meeting, str(os.getpid())).touch()
+    deadline = time.monotonic() + 60  # a loaded machine's bound for the other worker's start
+    while len(os.listdir(meeting)) < 2 and time.monotonic() < deadline:
+        time.sleep(0.01)
     return os.getpid(), folder
 
 
 def run_pool_script(script: str, tmp: Path, start_method: str):
     """Run `script` in a fresh interpreter from the project's root (tests/support/fresh_python.py:
     its imports done, nothing else), its temporary folders in `tmp`, its pools' workers started
-    by `start_method`; it must succeed."""
+    by `start_method`; it must succeed. The script finds `meeting`, an empty folder outside
+    `tmp` for pid_and_worker_folder, in its namespace."""
     import os
 
     from tests.conftest import ROOT
     from tests.support import fresh_python
+    meeting = tmp.parent / f"{tmp.name}-meeting"
+    meeting.mkdir()
+    script = f"meeting = {str(meeting)!r}\n" + script
     done = fresh_python.run(script, cwd=ROOT, timeout=120, env={
         **os.environ, "TMPDIR": str(tmp), "CRANKFMU_START_METHOD": start_method})
     assert done.returncode == 0, done.stderr[-3000:]
@@ -107,7 +116,7 @@ def test_workers_that_the_pool_ends_remove_their_folders(tmp_path, start_method)
         "from crankfmu.studies.executor import LocalPoolExecutor\n"
         "from tests.test_executor import pid_and_worker_folder\n"
         "pool = LocalPoolExecutor(2)\n"
-        "workers = [f.result() for f in [pool._pool.submit(pid_and_worker_folder)\n"
+        "workers = [f.result() for f in [pool._pool.submit(pid_and_worker_folder, meeting)\n"
         "                                for _ in range(2)]]\n"
         "os.kill(workers[0][0], signal.SIGKILL)\n"
         "import time\n"
@@ -144,7 +153,7 @@ def test_workers_of_a_closed_pool_leave_no_folder_and_not_the_parents(tmp_path, 
         "from tests.test_executor import pid_and_worker_folder\n"
         "mine = _new_private('crankfmu-parent-')\n"  # the parent's own private folder
         "pool = LocalPoolExecutor(2)\n"
-        "workers = [f.result() for f in [pool._pool.submit(pid_and_worker_folder)\n"
+        "workers = [f.result() for f in [pool._pool.submit(pid_and_worker_folder, meeting)\n"
         "                                for _ in range(2)]]\n"
         "pool.close()\n"
         "import os\n"

@@ -215,7 +215,9 @@ def test_killed_local_worker_loses_nothing(tmp_path, rotor_fmu_dir, serial_run):
 
 
 def _session_processes(sid: int) -> list[tuple[int, str]]:
-    """(pid, command line) of every process of the session `sid` (Linux /proc)."""
+    """(pid, command line) of every live process of the session `sid` (Linux /proc). A zombie
+    (state Z) has ended: it waits only for its new parent to collect its exit status, which
+    here took up to 1.4 s after the kill (the session's leader, their parent, was killed)."""
     found = []
     for pid in filter(str.isdigit, os.listdir("/proc")):
         try:
@@ -223,7 +225,8 @@ def _session_processes(sid: int) -> list[tuple[int, str]]:
             command = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
         except OSError:  # ended meanwhile
             continue
-        if int(stat[stat.rindex(")") + 2:].split()[3]) == sid:
+        state, _, _, session = stat[stat.rindex(")") + 2:].split()[:4]
+        if int(session) == sid and state != "Z":
             found.append((int(pid), command[:120]))
     return found
 
@@ -250,11 +253,20 @@ def test_kill_9_of_a_sweep_leaves_no_process_and_no_temporary_folder(tmp_path, r
     assert not [p.name for p in tmp.iterdir() if p.name.startswith("crankfmu-")]
 
 
+def _fmu_loaded(pid: int) -> bool:
+    """Whether process `pid` has an FMU's binary mapped (it is in a run: Linux /proc)."""
+    try:
+        return "/binaries/linux64/" in Path(f"/proc/{pid}/maps").read_text()
+    except OSError:  # ended meanwhile
+        return False
+
+
 def kill_9_mid_run(args: list[str], tmp_path: Path, start_method: str, workers: int):
     """Start `crankfmu ARGS` in its own session (temporary folders in tmp_path/tmp, workers
-    started by `start_method`), wait until `workers` worker processes run, let them run 1 s,
-    kill -9 the crankfmu process and wait up to 30 s (a loaded machine's bound) for the session
-    to empty. Returns (the session's processes before the kill, those left, the temp folder)."""
+    started by `start_method`), wait until `workers` worker processes have loaded an FMU (they
+    are mid-run: before, a fixed 1 s), kill -9 the crankfmu process and wait up to 30 s (a
+    loaded machine's bound) for the session to empty. Returns (the session's processes before
+    the kill, those left, the temp folder)."""
     import subprocess
     import sys
     tmp = tmp_path / "tmp"
@@ -266,18 +278,17 @@ def kill_9_mid_run(args: list[str], tmp_path: Path, start_method: str, workers: 
     sid = process.pid
     try:
         end = time.time() + 120
-        while len([p for p, c in _session_processes(sid)  # the workers
-                   if p != sid and "resource_tracker" not in c]) < workers:
+        while len([p for p, c in _session_processes(sid)  # the workers, in a run
+                   if p != sid and "resource_tracker" not in c and _fmu_loaded(p)]) < workers:
             assert time.time() < end and process.poll() is None, \
                 process.stderr.read().decode()[-2000:]
-            time.sleep(0.1)
-        time.sleep(1.0)  # the workers load their FMUs and run
+            time.sleep(0.05)
         before = _session_processes(sid)
         os.kill(process.pid, signal.SIGKILL)
         process.wait()
         end = time.time() + 30
         while _session_processes(sid) and time.time() < end:
-            time.sleep(0.1)
+            time.sleep(0.05)
         left = _session_processes(sid)
     finally:
         for pid, _ in _session_processes(sid):  # what the test started, by its id

@@ -62,19 +62,23 @@ def _wait_for_shutdown(proc: subprocess.Popen) -> None:
             return
 
 
-def trial(phase: str, rng: random.Random, work: Path, fmu_dir: Path, cwd: Path) -> dict:
-    """One Ctrl-C in `phase`; returns phase, delay, status, stderr, clean (see the docstring)."""
-    scene = work / f"ctrl_c_{phase}.toml"
-    scene.write_text(rotor(1000.0 if phase == "run" else 0.02))
-    out = work / f"ctrl_c_{phase}_{rng.random():.9f}"
+DELAYS = {"imports": (0.0, 0.2), "run": (0.2, 4.0), "shutdown": (0.0, 0.5)}  # s: the moment
+
+
+def plan(phase: str, rng: random.Random) -> tuple[str, str, float]:
+    """(phase, the output folder's name, the delay [s] of the Ctrl-C in it), drawn from `rng`."""
+    name = f"ctrl_c_{phase}_{rng.random():.9f}"
+    return phase, name, rng.uniform(*DELAYS[phase])
+
+
+def trial(planned: tuple[str, str, float], work: Path, fmu_dir: Path, cwd: Path) -> dict:
+    """One Ctrl-C as `planned`; returns phase, delay, status, stderr, clean (the docstring)."""
+    phase, name, delay = planned
+    scene = work / f"ctrl_c_{phase}.toml"  # written by campaign
+    out = work / name
     proc = start(scene, out, fmu_dir, cwd, "--no-estimate")
-    if phase == "imports":
-        delay = rng.uniform(0.0, 0.2)
-    elif phase == "run":
-        delay = rng.uniform(0.2, 4.0)
-    else:
+    if phase == "shutdown":
         _wait_for_shutdown(proc)
-        delay = rng.uniform(0.0, 0.5)
     time.sleep(delay)
     proc.send_signal(signal.SIGINT)
     _, stderr = proc.communicate(timeout=120)
@@ -94,7 +98,16 @@ def _written_is_whole(csv: Path, phase: str) -> bool:
         meta["outcome"] == ("interrupted" if phase == "run" else "completed")
 
 
-def campaign(n: int, seed: int, work: Path, fmu_dir: Path, cwd: Path) -> list[dict]:
-    """n trials, the phases in turn."""
+def campaign(n: int, seed: int, work: Path, fmu_dir: Path, cwd: Path,
+             at_once: int = 1) -> list[dict]:
+    """n trials, the phases in turn, `at_once` of them at a time (each is mostly waiting: the
+    interpreter's start, the delay), in the order of the plan: the delays drawn for a seed
+    are the same however many run at once."""
+    from concurrent.futures import ThreadPoolExecutor
+
     rng = random.Random(seed)
-    return [trial(PHASES[k % len(PHASES)], rng, work, fmu_dir, cwd) for k in range(n)]
+    for phase in PHASES:  # written before the trials start: they share them
+        (work / f"ctrl_c_{phase}.toml").write_text(rotor(1000.0 if phase == "run" else 0.02))
+    plans = [plan(PHASES[k % len(PHASES)], rng) for k in range(n)]
+    with ThreadPoolExecutor(max(1, at_once)) as pool:
+        return list(pool.map(lambda planned: trial(planned, work, fmu_dir, cwd), plans))
