@@ -575,6 +575,19 @@ def test_runs_in_one_process_grow_memory_by_less_than_100_kb_each(tmp_path, roto
     assert grown < LEAK_RUNS * 100 * 2**10
 
 
+def test_runs_in_one_process_leave_sys_path_as_the_first_run_left_it(tmp_path, rotors):
+    """pythonfmu puts an FMU's resources folder on sys.path at every instantiation: before,
+    sys.path grew by one entry per FMU per run (fmu.instance.drop_repeated_path_entries)."""
+    import sys
+    path = rotor_scene(tmp_path, stop=0.002, step=1e-3)
+    options = RunOptions(out=None, fmu_dir=rotors, progress=False, estimate=False)
+    run_scene(load_scene(path), options)
+    after_one = list(sys.path)
+    for _ in range(3):
+        run_scene(load_scene(path), options)
+    assert sys.path == after_one
+
+
 HAMMER_ALONE = """
 [scene]
 name = "hammer_alone"

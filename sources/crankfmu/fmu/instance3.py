@@ -17,7 +17,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi3 import FMU3Model, FMU3Slave, fmi3Boolean, fmi3Float64, fmi3ValueReference
 
 from .archive import load_fmu
-from .instance import FmuInstance, StepStatistics
+from .instance import FmuInstance, StepStatistics, drop_repeated_path_entries
 
 FMI3_WARNING = 1  # fmi3Status: a call returning more than fmi3Warning failed
 CO_SIMULATION, MODEL_EXCHANGE = "CoSimulation", "ModelExchange"
@@ -85,6 +85,7 @@ class Fmu3Instance(FmuInstance):
     def instantiate(self, logging_on: bool = False) -> None:
         callback = None if self._log is None else self._log_message
         self.fmu.instantiate(loggingOn=logging_on, logMessage=callback)
+        drop_repeated_path_entries()
         self._component = self.fmu.component
 
     def _log_message(self, env, status, category, message) -> None:
