@@ -13,7 +13,6 @@ from pathlib import Path
 from typing import Any
 
 from fmpy.fmi1 import FMICallException
-from lxml import etree
 
 from ..errors import CrankfmuError, InterruptedRun
 from ..system.scene import Scene, SceneError, check_run_size
@@ -86,6 +85,18 @@ class RunOptions:
     label: str | None = None  # the progress bar's (default: the scene's name)
 
 
+_UNREADABLE = (OSError, ValueError, KeyError, IndexError, TypeError, AttributeError,
+               zipfile.BadZipFile)
+
+
+def unreadable_fmu(err: Exception) -> bool:
+    """Whether `err`, raised while loading an FMU, says it is not an FMU fmpy can read (lxml's
+    errors too: lxml is imported where fmpy parses a modelDescription, and a run whose FMUs
+    were checked by an earlier process does not import it)."""
+    lxml = sys.modules.get("lxml.etree")
+    return isinstance(err, _UNREADABLE) or (lxml is not None and isinstance(err, lxml.LxmlError))
+
+
 def load_fmus(scene: Scene, fmu_dir: Path, log: LogCollector) -> dict[str, FmuInstance]:
     """Every component's FMU, loaded (FMI 2.0 or 3.0, as the file is) for the interface the
     scene's master steps it through (`interface` of its class: CoSimulation by default)."""
@@ -96,8 +107,9 @@ def load_fmus(scene: Scene, fmu_dir: Path, log: LogCollector) -> dict[str, FmuIn
         path = resolve_fmu(scene, name, fmu_dir, model_exchange=interface == MODEL_EXCHANGE)
         try:
             fmus[name] = open_fmu(name, path, log, interface)
-        except (OSError, ValueError, KeyError, IndexError, TypeError, AttributeError,
-                zipfile.BadZipFile, etree.LxmlError) as err:  # not an FMU fmpy can read
+        except Exception as err:  # noqa: BLE001 - re-raised below unless it is unreadable_fmu
+            if not unreadable_fmu(err):
+                raise
             close_fmus(fmus)
             raise SceneError(scene.path, f"[components.{name}].fmu",
                              f"cannot load {path}: {type(err).__name__}: {err}") from None

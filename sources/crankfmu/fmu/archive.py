@@ -10,7 +10,9 @@ there and unpacks nothing. A changed FMU file has another hash, so it can never 
 earlier content; a folder is written under a temporary name and renamed when whole, so processes
 that unpack the same FMU at once each see a whole folder (the first rename wins); a cached folder is
 checked before each use against the manifest written with it (the members' files, their sizes and
-modification times) and unpacked again when it differs, and removed when unused for
+modification times) and unpacked again when it differs; it keeps the record of the checks its
+content passed and its parsed model description (CheckedFmu), so that a later process neither
+checks nor parses that content again; it is removed when unused for
 CACHE_KEEP_SECONDS. Without a usable cache (CRANKFMU_CACHE_DIR set to "", a folder that is not this
 user's alone) each process unpacks into a private temporary folder, removed at exit. Within a
 process an FMU content is unpacked and loaded once: a shared library is never unloaded here (see
@@ -22,16 +24,19 @@ from __future__ import annotations
 import atexit
 import contextlib
 import errno
+import functools
 import hashlib
 import io
 import json
 import os
+import pickle
 import shutil
 import stat
 import tempfile
 import threading
 import time
 import zipfile
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -42,6 +47,7 @@ CACHE_ENV = "CRANKFMU_CACHE_DIR"  # the cache folder; "" for none
 CACHE_KEEP_SECONDS = 14 * 86400   # a cached FMU unused this long is removed (at a new unpack)
 PART_PREFIX = ".part-"            # a folder being unpacked (left by a process that was killed)
 MANIFEST = ".crankfmu-files"      # in a cached folder: its files' sizes and times (_matches)
+CHECKED = ".crankfmu-checked"     # in a cached folder: what load_fmu's checks found (CheckedFmu)
 _loaded: dict[str, tuple[str, object]] = {}  # sha256 of an FMU file -> (folder, description)
 _bundles: dict[str, object] = {}  # sha256 of an FMU file -> its bundle (inspected) or None
 _private: set[str] = set()  # this process's folders, removed at exit: temporary, or part-done
@@ -303,22 +309,42 @@ def load_fmu(path: Path) -> tuple[str, Any]:
     """(unpacked folder, model description) of the FMU file at `path`, checked, once per FMU
     content in this process (see the module's docstring). Refusals are FmuRefused (a
     ValueError); a file that is not a zip raises zipfile.BadZipFile."""
-    from fmpy import read_model_description
-
-    from .bundle import BundleError, check_description
     data, key = read_fmu(path)
     if key in _loaded and os.path.isdir(_loaded[key][0]):
         _touch(_loaded[key][0])
         return _loaded[key]
     with zipfile.ZipFile(io.BytesIO(data)) as zf:
-        bundle = inspect_fmu(zf, key)
         members = _needed(zf)
-        root = cache_dir()
-        try:
-            folder = _cached_folder(root, key, members, zf) if root is not None else None
-        except OSError:  # e.g. a full disk there: this process's own folder instead
-            folder = None
-        folder = folder or _private_folder(members, zf)
+        found = checked_fmu(key, members)  # checked when its cached folder was unpacked
+        folder, checked = found if found is not None else _check_and_unpack(zf, key, members)
+    _bundles[key] = checked.bundle
+    _loaded[key] = folder, checked.description
+    return _loaded[key]
+
+
+def _check_and_unpack(zf: zipfile.ZipFile, key: str, members) -> tuple[str, CheckedFmu]:
+    """Check the FMU (its open zip), unpack it into the cache (else into a folder of this
+    process's own) and read its description; a cached folder keeps the record."""
+    bundle = inspect_fmu(zf, key)
+    root = cache_dir()
+    folder: str | None
+    try:
+        folder = _cached_folder(root, key, members, zf) if root is not None else None
+    except OSError:  # e.g. a full disk there: this process's own folder instead
+        folder = None
+    folder = folder or _private_folder(members, zf)
+    checked = CheckedFmu(_checks_id(), bundle, _described(folder, bundle), zf.namelist())
+    if folder not in _private:
+        _write_checked(folder, checked)
+    return folder, checked
+
+
+def _described(folder: str, bundle):
+    """The model description in the unpacked `folder`, checked against the FMU's `bundle`;
+    the folder is discarded when it is this process's own and a check fails."""
+    from fmpy import read_model_description
+
+    from .bundle import BundleError, check_description
     try:
         description = read_model_description(os.path.join(folder, "modelDescription.xml"))
         if bundle is not None:
@@ -330,8 +356,64 @@ def load_fmu(path: Path) -> tuple[str, Any]:
         if isinstance(err, BundleError):
             raise FmuRefused(str(err)) from None
         raise
-    _loaded[key] = folder, description
-    return _loaded[key]
+    return description
+
+
+@dataclass
+class CheckedFmu:
+    """What load_fmu's checks found for an FMU content: kept in its cached folder (CHECKED),
+    so that a later process loads it without checking and parsing again (2 FMUs: about 15 ms
+    of each run's start, and lxml's import). Written only after every check passed, into the
+    folder named by the content's SHA-256, in a cache that is this user's alone (cache_dir):
+    the folder's Python code, which every run executes, is trusted on the same grounds."""
+
+    checks: str       # _checks_id() of the process that wrote it: another one ignores it
+    bundle: Any       # fmu.bundle.Bundle, checked against its digest; None: not crankfmu's
+    description: Any  # fmpy's ModelDescription, checked against the bundle
+    names: list[str]  # every member of the FMU file
+
+
+@functools.lru_cache(maxsize=None)
+def _checks_id() -> str:
+    """The checks a record stands for: this module's and fmu/bundle.py's code and fmpy's
+    version (a changed check, or another parser of the description, ignores older records)."""
+    import fmpy
+    here = Path(__file__)
+    code = here.read_bytes() + here.with_name("bundle.py").read_bytes()
+    return f"{hashlib.sha256(code).hexdigest()[:16]}-fmpy-{fmpy.__version__}"
+
+
+def checked_fmu(key: str, members: list[zipfile.ZipInfo] | None = None
+                ) -> tuple[str, CheckedFmu] | None:
+    """(its cached folder, the record of its checks) of the FMU content `key` (its SHA-256),
+    when the cache holds a record of this code and, given `members` (what _needed lists), the
+    folder still matches them; else None."""
+    root = cache_dir()
+    if root is None:
+        return None
+    folder = root / key
+    try:
+        with open(folder / CHECKED, "rb") as f:
+            checked = pickle.load(f)
+    except Exception:  # noqa: BLE001 - missing, half written or of other code: check again
+        return None
+    if not isinstance(checked, CheckedFmu) or checked.checks != _checks_id() or (
+            members is not None and not _matches(folder, members)):
+        return None
+    _touch(str(folder))
+    return str(folder), checked
+
+
+def _write_checked(folder: str, checked: CheckedFmu) -> None:
+    """Write the record of the checks into the cached `folder` (whole or not at all)."""
+    part = os.path.join(folder, f"{CHECKED}.{os.getpid()}.part")
+    try:
+        with open(part, "wb") as f:
+            pickle.dump(checked, f, protocol=pickle.HIGHEST_PROTOCOL)
+        os.replace(part, os.path.join(folder, CHECKED))
+    except (OSError, pickle.PicklingError):  # e.g. a full disk: the next process checks again
+        with contextlib.suppress(OSError):
+            os.unlink(part)
 
 
 def check_model_description_xml(fmu) -> None:

@@ -325,7 +325,7 @@ def rebuild_reason(path: Path, model_name: str, fmi_version: int = 2,
     built."""
     from fmpy import platform, platform_tuple, sharedLibraryExtension
 
-    from .archive import inspect_fmu, parse_safe_xml, read_fmu
+    from .archive import checked_fmu, inspect_fmu, parse_safe_xml, read_fmu
     if not path.is_file():
         return Rebuild("FMU missing", False)
     build_id = build_id or current_build_id(model_name)
@@ -344,10 +344,16 @@ def rebuild_reason(path: Path, model_name: str, fmi_version: int = 2,
                 return Rebuild("not a crankfmu build: no bundled crankfmu package", True)
             if bundle.digest != build_id:
                 return Rebuild("sources changed", False)
-            inspect_fmu(zf, key)  # names, description, and files those of its digest
-            root = parse_safe_xml(zf.read("modelDescription.xml"), "modelDescription.xml")
-            token = root.get("guid" if fmi_version == 2 else "instantiationToken")
-            check_description(bundle, model_name, root.get("version"), token)
+            found = checked_fmu(key)  # this content loaded and checked before: not again
+            if found is not None:
+                description = found[1].description
+                version, token = description.version, description.guid  # FMI 3.0: the token
+            else:
+                inspect_fmu(zf, key)  # names, description, and files those of its digest
+                root = parse_safe_xml(zf.read("modelDescription.xml"), "modelDescription.xml")
+                version = root.get("version")
+                token = root.get("guid" if fmi_version == 2 else "instantiationToken")
+            check_description(bundle, model_name, version, token)
             names = set(zf.namelist())
             wanted = [binary] + [library_binary] * (
                 f"resources/{launcher.CONFIG_NAME}" in names)  # behind the launcher
