@@ -27,6 +27,20 @@ def pytest_configure(config) -> None:
             prefix="crankfmu-test-fmus-")
 
 
+def pytest_collection_finish(session) -> None:
+    """The test processes collect cyclic garbage less often than Python's default: what exists
+    once the tests are collected (numpy, scipy, fmpy, matplotlib, crankfmu, the test modules)
+    lives to the session's end and is moved out of the collector's reach (gc.freeze), and a
+    collection starts after 20,000 allocations instead of 700 (gc.set_threshold). Before, 3,000
+    collections per worker, 19 to 30 of them full ones over some 250,000 objects, took 2.5 and
+    4.9 s of CPU in the two workers (a gc.callbacks timer, 2026-11-26). Reference counting frees
+    the rest as before; tests that need a collection make one (gc.collect)."""
+    import gc
+    gc.collect()
+    gc.freeze()
+    gc.set_threshold(20_000, 10, 10)
+
+
 def pytest_unconfigure(config) -> None:
     import shutil
     building = getattr(config, "_crankfmu_catalog_thread", None)
