@@ -333,8 +333,9 @@ def _check_and_unpack(zf: zipfile.ZipFile, key: str, members) -> tuple[str, Chec
     except OSError:  # e.g. a full disk there: this process's own folder instead
         folder = None
     folder = folder or _private_folder(members, zf)
-    checked = CheckedFmu(_checks_id(), bundle, _described(folder, bundle), zf.namelist())
-    if folder not in _private:
+    checks = _checks_id()
+    checked = CheckedFmu(checks or "", bundle, _described(folder, bundle))
+    if folder not in _private and checks is not None:
         _write_checked(folder, checked)
     return folder, checked
 
@@ -370,16 +371,19 @@ class CheckedFmu:
     checks: str       # _checks_id() of the process that wrote it: another one ignores it
     bundle: Any       # fmu.bundle.Bundle, checked against its digest; None: not crankfmu's
     description: Any  # fmpy's ModelDescription, checked against the bundle
-    names: list[str]  # every member of the FMU file
 
 
 @functools.lru_cache(maxsize=None)
-def _checks_id() -> str:
+def _checks_id() -> str | None:
     """The checks a record stands for: this module's and fmu/bundle.py's code and fmpy's
-    version (a changed check, or another parser of the description, ignores older records)."""
+    version (a changed check, or another parser of the description, ignores older records);
+    None where that code cannot be read (no records then)."""
     import fmpy
     here = Path(__file__)
-    code = here.read_bytes() + here.with_name("bundle.py").read_bytes()
+    try:
+        code = here.read_bytes() + here.with_name("bundle.py").read_bytes()
+    except OSError:  # e.g. imported from a zip
+        return None
     return f"{hashlib.sha256(code).hexdigest()[:16]}-fmpy-{fmpy.__version__}"
 
 
@@ -389,7 +393,7 @@ def checked_fmu(key: str, members: list[zipfile.ZipInfo] | None = None
     when the cache holds a record of this code and, given `members` (what _needed lists), the
     folder still matches them; else None."""
     root = cache_dir()
-    if root is None:
+    if root is None or _checks_id() is None:
         return None
     folder = root / key
     try:
