@@ -220,13 +220,6 @@ def trial_scene(scene, setting: Setting):
     return trial
 
 
-def run_one(scene, setting: Setting, metric: Metric, ref: ReferenceSamples, fmu_dir,
-            runs_dir: Path, executor=None) -> Outcome:
-    """One setting, run on `executor` (default: in this process)."""
-    return run_settings(scene, [setting], metric, ref, fmu_dir, runs_dir, executor,
-                        progress=False)[0]
-
-
 def run_settings(scene, settings: list[Setting], metric: Metric, ref: ReferenceSamples, fmu_dir,
                  runs_dir: Path, executor=None, progress=False, label: str = "runs",
                  report=None, resume_key: str | None = None) -> list[Outcome]:
