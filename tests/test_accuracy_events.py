@@ -4,7 +4,6 @@ convergence of event figures through the FMUs on short runs (the full tables are
 scripts/accuracy_tables.py)."""
 from __future__ import annotations
 
-import csv
 import math
 
 import numpy as np
@@ -14,7 +13,6 @@ from tests.conftest import SCENARIOS
 from crankfmu.studies.accuracy import (AccuracyOptions, EventSpec, Setting, event_error,
                                        parse_event_specs, run_accuracy)
 from crankfmu.cosim.events import EventSpecError, event_values
-from crankfmu.cosim.metrics import MetricError
 from crankfmu.system.load import load_scene
 
 

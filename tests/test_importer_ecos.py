@@ -2,6 +2,8 @@
 against crankfmu's Jacobi master."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -99,10 +101,9 @@ NATIVE_STOP = 0.05  # s, 50 steps of 1 ms
 def ecos_cli(tmp_path_factory) -> Path:
     import os
     import shutil
-    from pathlib import Path as _Path
 
     import ecospy
-    source = _Path(ecospy.__file__).parent / "binaries" / "ecos"
+    source = Path(ecospy.__file__).parent / "binaries" / "ecos"
     if not source.exists():
         if os.environ.get("CI"):
             raise AssertionError(f"{source} missing from the ecospy wheel")
