@@ -330,7 +330,6 @@ def test_portable_builds_are_byte_identical_wherever_the_builder_lies(tmp_path, 
     """Two builders whose environments lie elsewhere (sys.executable differs): portable FMUs of
     both FMI versions are byte-identical; default builds differ only in the `python =` line of
     resources/crankfmu_launcher.txt."""
-
     from crankfmu.fmu import launcher
     from crankfmu.fmu.build import build_fmu
     from crankfmu.fmu.build_fmi3 import build_fmu3

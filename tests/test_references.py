@@ -18,7 +18,6 @@ import importlib
 import re
 from pathlib import Path
 
-
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "sources" / "crankfmu"
 TOP = ("tests", "docs", "scripts", "benchmarks", "scenarios", "sources")
