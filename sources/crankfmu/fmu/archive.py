@@ -410,14 +410,12 @@ def checked_fmu(key: str, members: list[zipfile.ZipInfo] | None = None
 
 def _write_checked(folder: str, checked: CheckedFmu) -> None:
     """Write the record of the checks into the cached `folder` (whole or not at all)."""
-    part = os.path.join(folder, f"{CHECKED}.{os.getpid()}.part")
+    from ..outputs import OutputError, atomic_write
     try:
-        with open(part, "wb") as f:
-            pickle.dump(checked, f, protocol=pickle.HIGHEST_PROTOCOL)
-        os.replace(part, os.path.join(folder, CHECKED))
-    except (OSError, pickle.PicklingError):  # e.g. a full disk: the next process checks again
-        with contextlib.suppress(OSError):
-            os.unlink(part)
+        atomic_write(Path(folder, CHECKED),
+                     lambda f: pickle.dump(checked, f, protocol=pickle.HIGHEST_PROTOCOL))
+    except (OSError, OutputError, pickle.PicklingError):  # the next process checks again
+        pass
 
 
 def check_model_description_xml(fmu) -> None:

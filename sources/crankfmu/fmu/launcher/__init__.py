@@ -131,8 +131,8 @@ def _compile_kept(compiler: tuple[str, ...], files: tuple[tuple[str, bytes], ...
     module's docstring), so the kept bytes are what a compile gives; they are written whole
     (a temporary file renamed) and only into a folder that is this user's alone."""
     import hashlib
-    import tempfile
 
+    from ...outputs import OutputError, atomic_write
     from ..archive import cache_dir
     root, identity = cache_dir(), _compiler_identity(compiler)
     if root is None or identity is None:
@@ -144,13 +144,10 @@ def _compile_kept(compiler: tuple[str, ...], files: tuple[tuple[str, bytes], ...
     except OSError:  # not kept yet
         pass
     compiled = _compile(compiler, files)
-    fd, part = tempfile.mkstemp(prefix=f".{kept.name}.", suffix=".part", dir=root)
     try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(compiled)
-        os.replace(part, kept)
-    except OSError:  # not kept: the next process compiles again
-        Path(part).unlink(missing_ok=True)
+        atomic_write(kept, lambda f: f.write(compiled))
+    except (OSError, OutputError):  # not kept: the next process compiles again
+        pass
     return compiled
 
 
