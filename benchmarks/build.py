@@ -16,12 +16,13 @@ from __future__ import annotations
 
 import argparse
 import os
-import resource
 import statistics
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
+
+from jobs import timed  # benchmarks/, beside this file: CPU of a process tree
 
 ROOT = Path(__file__).resolve().parents[1]
 CATALOG = """
@@ -50,14 +51,6 @@ def environment(cache: str) -> dict:
     return env
 
 
-def tree_cpu(command: list[str], env: dict) -> float:
-    """CPU seconds (user + system) of `command` and the processes it waited for."""
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    subprocess.run(command, env=env, check=True, stdout=subprocess.DEVNULL)
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=3)
@@ -75,9 +68,9 @@ def main() -> None:
         subprocess.run([sys.executable, "-c", ONE, str(Path(tmp, "warm"))], env=env, check=True)
         kept, compiled = [], []
         for k in range(repeat):
-            kept.append(tree_cpu([sys.executable, "-c", ONE, str(Path(tmp, f"k{k}"))], env))
-            compiled.append(tree_cpu([sys.executable, "-c", ONE, str(Path(tmp, f"c{k}"))],
-                                     environment("")))
+            kept.append(timed([sys.executable, "-c", ONE, str(Path(tmp, f"k{k}"))], env)[1])
+            compiled.append(timed([sys.executable, "-c", ONE, str(Path(tmp, f"c{k}"))],
+                                  environment(""))[1])
         a, b = statistics.median(kept), statistics.median(compiled)
         print(f"(b) DcServoMotor in a fresh process: median CPU {a:.2f} s with the launcher "
               f"kept, {b:.2f} s compiling it; ratio {a / b:.2f} ({repeat} runs each)")
