@@ -71,7 +71,8 @@ def test_compare_on_a_pool_equals_serial(fmu_dir, tmp_path):
 
 
 def pid_and_worker_folder(meeting: str) -> tuple[int, str]:
-    """In a pool worker: its pid and its temporary folder (made now), once two such tasks have
+    """In a pool worker: its pid and its temporary folder (made now, with a private folder of
+    unpacked FMUs beside it, as a run without a cache makes), once two such tasks have
     started (each leaves its pid in the folder `meeting`): the one that started first holds its
     worker until the other has taken the second, so each of two such tasks runs on its own
     worker (before: a fixed 1 s pause, which mostly did the same)."""
@@ -79,7 +80,9 @@ def pid_and_worker_folder(meeting: str) -> tuple[int, str]:
     import time
 
     from crankfmu.cosim.workers import worker_dir
+    from crankfmu.fmu.archive import PRIVATE_PREFIX, _new_private
     folder = str(worker_dir())
+    _new_private(PRIVATE_PREFIX)
     Path(meeting, str(os.getpid())).touch()
     deadline = time.monotonic() + 60  # a loaded machine's bound for the other worker's start
     while len(os.listdir(meeting)) < 2 and time.monotonic() < deadline:
@@ -108,8 +111,9 @@ def run_pool_script(script: str, tmp: Path, start_method: str):
 @pytest.mark.parametrize("start_method", ["fork", "spawn"])
 def test_workers_that_the_pool_ends_remove_their_folders(tmp_path, start_method):
     """When a worker dies (here SIGKILL), the pool ends the others with SIGTERM, whose default
-    action runs no exit handler: before, they left their temporary folders. Only the killed
-    worker's folder may remain."""
+    action runs no exit handler: before, they left their temporary folders. The killed worker
+    removes nothing: its folders (its worker folder, its privately unpacked FMUs) are removed
+    by the parent as it closes the pool (before, they stayed for good: one per killed worker)."""
 
     script = (
         "import os, signal\n"
@@ -133,11 +137,14 @@ def test_workers_that_the_pool_ends_remove_their_folders(tmp_path, start_method)
         "        except ProcessLookupError:\n"
         "            break\n"
         "        time.sleep(0.05)\n"
-        "print(workers[0][1])\n")
+        "import pathlib, tempfile\n"
+        "print(sorted(p.name for p in pathlib.Path(tempfile.gettempdir()).iterdir()))\n")
     done = run_pool_script(script, tmp_path, start_method)
-    broken, killed = done.stdout.split()
+    broken = done.stdout.splitlines()[0]
     assert broken == "BrokenProcessPool"
-    assert [str(p) for p in tmp_path.iterdir()] == [killed]
+    # the folders left before the parent's exit (at its exit it removes its own)
+    assert done.stdout.splitlines()[1] == "[]", done.stdout
+    assert list(tmp_path.iterdir()) == [], [p.name for p in tmp_path.iterdir()]
 
 
 @pytest.mark.parametrize("start_method", ["fork", "spawn"])

@@ -132,15 +132,11 @@ class Companions:
     def close(self, abandon: bool = False) -> None:
         """Shut the workers down; `abandon`: stop them even in the middle of a run (the main
         run stopped, or the search is done: nobody will ask for the result)."""
-        if self._pool is None:
+        if self._pool is None or self._lifeline is None:  # no workers (both are set together)
             return
-        if abandon:  # the pool has no public kill; its worker processes are what runs
-            for process in list(getattr(self._pool, "_processes", {}).values()):
-                process.terminate()
-        self._pool.shutdown(wait=not abandon, cancel_futures=True)
+        from .workers import close_pool
+        close_pool(self._pool, self._lifeline, abandon)
         self._pool = None
-        if self._lifeline is not None:
-            self._lifeline.close()
 
     def __enter__(self):
         return self

@@ -5,6 +5,8 @@ companion worker (cosim/companions.py).
     new_pool(jobs) -> (pool, Lifeline)   a concurrent.futures.ProcessPoolExecutor whose workers
                                          run start_worker first; closing the Lifeline (or the
                                          parent's death) ends them
+    close_pool(pool, lifeline)           shut it down, and remove the temporary folders of
+                                         workers that were killed
     start_method()                       "fork" or "spawn" (its docstring says when)
     worker_dir()                         this process's temporary folder, removed at its exit
 
@@ -21,6 +23,7 @@ import tempfile
 import threading
 from pathlib import Path
 
+WORKER_PREFIX = "crankfmu-worker-"  # a process's temporary folder: <prefix><pid>-<random>
 _WORKER_DIR: Path | None = None
 _WORKER_DIR_LOCK = threading.Lock()  # made, or removed when the parent is gone: one at a time
 
@@ -33,7 +36,7 @@ def worker_dir(under: Path | None = None) -> Path:
         if _WORKER_DIR is None:
             import atexit
             import shutil
-            _WORKER_DIR = Path(tempfile.mkdtemp(prefix=f"crankfmu-worker-{os.getpid()}-",
+            _WORKER_DIR = Path(tempfile.mkdtemp(prefix=f"{WORKER_PREFIX}{os.getpid()}-",
                                                 dir=under))
             atexit.register(shutil.rmtree, _WORKER_DIR, True)
     return _WORKER_DIR
@@ -84,6 +87,37 @@ def new_pool(jobs: int, preload: str = "crankfmu.cosim.runner"):
                                initargs=(lifeline.reader, preload,
                                          lifeline.writer if forked else None))
     return pool, lifeline
+
+
+def close_pool(pool, lifeline: Lifeline, abandon: bool = False) -> None:
+    """Shut `pool` (of new_pool) down and close its `lifeline`; `abandon`: stop its workers even
+    in the middle of a task, and do not wait for them. Then remove the temporary folders of
+    every worker that has ended without removing them: a SIGKILL (kill -9, the kernel's
+    out-of-memory killer) runs no exit handler, and each such death in a study left a folder
+    in the temporary folder for good. A worker still ending (on the SIGTERM of `abandon`)
+    removes its own."""
+    # the pool has no public list of its processes, nor a kill: its worker processes are these
+    workers = dict(getattr(pool, "_processes", None) or {})
+    if abandon:
+        for process in workers.values():
+            process.terminate()
+    pool.shutdown(wait=not abandon, cancel_futures=True)
+    lifeline.close()
+    _remove_folders_of_ended(workers)
+
+
+def _remove_folders_of_ended(workers: dict) -> None:
+    """The folders (worker_dir's, the FMUs a worker unpacked privately) of the processes in
+    `workers` (pid -> multiprocessing.Process) that have ended. Their names carry the pid; one
+    that ended normally left none to find."""
+    from ..fmu.archive import PRIVATE_PREFIX, remove_tree
+    tmp = Path(tempfile.gettempdir())  # where a worker makes them: it inherits the setting
+    for pid, process in workers.items():
+        if process.exitcode is None:  # still ending
+            continue
+        for prefix in (WORKER_PREFIX, PRIVATE_PREFIX):
+            for folder in tmp.glob(f"{prefix}{pid}-*"):
+                remove_tree(folder)
 
 
 def ready() -> int:

@@ -46,6 +46,7 @@ NAME_MAX = 255                    # bytes in one file or folder name (Linux, mos
 CACHE_ENV = "CRANKFMU_CACHE_DIR"  # the cache folder; "" for none
 CACHE_KEEP_SECONDS = 14 * 86400   # a cached FMU unused this long is removed (at a new unpack)
 PART_PREFIX = ".part-"            # a folder being unpacked (left by a process that was killed)
+PRIVATE_PREFIX = "crankfmu-fmu-"  # a process's own unpacked FMU, in the temporary folder
 MANIFEST = ".crankfmu-files"      # in a cached folder: its files' sizes and times (_matches)
 CHECKED = ".crankfmu-checked"     # in a cached folder: what load_fmu's checks found (CheckedFmu)
 _loaded: dict[str, tuple[str, object]] = {}  # sha256 of an FMU file -> (folder, description)
@@ -81,8 +82,10 @@ def forget_private() -> None:
 
 
 def _new_private(prefix: str, parent: str | Path | None = None) -> str:
+    """A new private folder `<prefix><pid>-<random>`: the pid lets the parent of a worker that
+    was killed, and so could not remove its folders, find them (cosim/workers.py)."""
     with _private_lock:
-        folder = tempfile.mkdtemp(prefix=prefix, dir=parent)
+        folder = tempfile.mkdtemp(prefix=f"{prefix}{os.getpid()}-", dir=parent)
         _private.add(folder)
     return folder
 
@@ -193,7 +196,7 @@ def _unpack_into(folder: str, members: list[zipfile.ZipInfo], zf: zipfile.ZipFil
 
 
 def _private_folder(members, zf) -> str:
-    folder = _new_private("crankfmu-fmu-")
+    folder = _new_private(PRIVATE_PREFIX)
     try:
         _unpack_into(folder, members, zf)
     except BaseException:

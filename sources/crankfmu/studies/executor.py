@@ -353,9 +353,9 @@ class LocalPoolExecutor(Executor):
                                    f"run; {MAIN_GUARD} (the workers' own messages are above)")
 
     def _close_pool(self) -> None:
-        self._pool.shutdown(wait=True, cancel_futures=True)
+        from ..cosim.workers import close_pool
+        close_pool(self._pool, self._lifeline)
         self._pool = None
-        self._lifeline.close()
 
     def _run(self, tasks, files, done) -> None:
         from concurrent.futures import FIRST_COMPLETED, wait
