@@ -164,7 +164,9 @@ def fmi3_dir(request, tmp_path_factory) -> Path:
 # -- pytest-xdist: which worker runs what, and in which order ------------------------------------
 # Files that share what a support module computes once run on one worker, one after the other.
 SHARED = {"tests/test_papers_figures.py": "papers",   # tests/support/papers_data.py
-          "tests/test_papers_claims.py": "papers"}
+          "tests/test_papers_claims.py": "papers",
+          "tests/test_adaptive_edges.py": "clutch_hammer",  # tests/support/clutch_reference.py
+          "tests/test_clutch_hammer.py": "clutch_hammer"}
 # The longest units first (a file, or the files of a SHARED name): the short ones then fill the
 # end, and the two workers finish together. Seconds of wall time per unit in `python -m pytest`
 # (2026-11-26 16:36 UTC, a per-test plugin): fmi3 16.5, sweep 10.5, papers 9.9, large_steps 7.7,
