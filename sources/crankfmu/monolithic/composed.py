@@ -24,9 +24,10 @@ Hybrid models compose through their contract (`advance_follows_contract`, runtim
 their terminal events (locks, break-frees, contact start and end, forging-window edges) are
 located by the solver with the inputs following the whole state (no hold); their non-terminal
 `monitor_functions` (force extrema) are located too and handed to `observe`, as the state at
-every restart is; `on_input_change` runs at every restart (record times and the time points of
-[inputs] tables), where the FMU runs it at every communication point: in the composed ODE the
-inputs are continuous between those restarts, so it only acts where an input table jumps.
+every restart and record time is; `on_input_change` runs at every restart (the time points of
+[inputs] tables, and record times: every one with Radau, every hundredth with DOP853, see
+monolithic/solve.py), where the FMU runs it at every communication point: in the composed ODE
+the inputs are continuous between those restarts, so it only acts where an input table jumps.
 A step-interpolated [inputs] table is held at its value at the restart over the whole
 integration, so its jump is seen at the restart, never a rounding error before it.
 
@@ -121,7 +122,7 @@ class ComposedModel(PhysicsModel):
     model_name = "Composed"
     description = "monolithic composition of a scene's physics models"
     max_derivative_calls_per_step = 10_000_000
-    max_events_per_step = 100_000  # per record interval: a hammer's contacts and monitors
+    max_events_per_step = 100_000  # per restart (up to 100 record intervals): contacts, locks
 
     def __init__(self, scene: Scene):
         super().__init__()
@@ -350,9 +351,13 @@ class ComposedModel(PhysicsModel):
                 x[part.states] = part.model.on_input_change(t, x[part.states], u_k)
         return x
 
-    def advance(self, t0, x0, h, u_of_t, rtol, atol):
+    def advance(self, t0, x0, h, u_of_t, rtol, atol, sample=None):
         """The hybrid contract for the whole scene: input changes at t0, then integration with
-        the components' terminal events (on_event, restart) and monitors (observe)."""
+        the components' terminal events (on_event, restart) and monitors (observe).
+        sample(t_from, t_to, state_at): called, where given, for each stretch between the
+        restarts and the monitors' crossings, in time order, with the solver's dense output
+        (state_at(t)) and the components' discrete states as they are in [t_from, t_to): the
+        monolithic reference records there (solve.py)."""
         if h <= 0.0:
             return np.array(x0, dtype=float)
         t, t_end = t0, t0 + h
@@ -363,13 +368,21 @@ class ComposedModel(PhysicsModel):
                 self.restart_state, self.restart_time = x, t
                 events = self.event_functions(u_of_t)
                 monitors = self.monitor_functions(u_of_t)
-                sol = self.integrate(u_of_t, t, x, t_end, rtol, atol, events + monitors)
-                for i, te, xe in sol.crossings:
+                dense: list | None = [] if sample else None
+                sol = self.integrate(u_of_t, t, x, t_end, rtol, atol, events + monitors,
+                                     interpolant=dense)
+                sampled_to = t
+                for i, te, xe in sorted(sol.crossings, key=lambda c: c[1]):  # time order
                     if i >= len(events):
+                        if dense:
+                            sample(sampled_to, te, dense[0])
+                            sampled_to = te
                         k = self._monitor_owner[i - len(events)]
                         part = self.parts[k]
                         part.model.observe(te, np.asarray(xe)[part.states],
                                            self.inputs_at(te, np.asarray(xe))[k])
+                if dense:
+                    sample(sampled_to, sol.t if sol.status else t_end, dense[0])
                 if sol.status == 0:
                     self.observe(t_end, sol.x)
                     return np.array(sol.x, dtype=float)

@@ -2,8 +2,10 @@
 
 The record grid is the runner's (start time, then every [record].interval rounded to whole
 communication steps, and the stop time), so a reference CSV and a run CSV line up row by row.
-The integration restarts at every record time and at the time points of [inputs] tables
-(their kinks and jumps), with `PhysicsModel.advance` locating the models' events in between.
+The integration restarts at the time points of [inputs] tables (their kinks and jumps), with
+`ComposedModel.advance` locating the models' events in between; the record times are read
+from DOP853's dense output (with Radau the integration restarts at each of them, see
+solve_reference).
 """
 from __future__ import annotations
 
@@ -88,8 +90,11 @@ class RecordMap:
 
 
 def solve_reference(scene: Scene, rtol: float = DEFAULT_RTOL, times=None,
-                    method: str | None = None, progress: bool | None = False) -> ReferenceResult:
-    """Integrate the composed scene and record on `times` (default: the run's grid)."""
+                    method: str | None = None, progress: bool | None = False,
+                    dense: bool = True) -> ReferenceResult:
+    """Integrate the composed scene and record on `times` (default: the run's grid). dense:
+    read the record times from DOP853's dense output (False: restart the integration at each,
+    as always with Radau: benchmarks/reference.py compares the two)."""
     model = ComposedModel(scene)
     rec_map = RecordMap(model)
     times = record_times(scene) if times is None else np.asarray(times, dtype=float)
@@ -98,19 +103,58 @@ def solve_reference(scene: Scene, rtol: float = DEFAULT_RTOL, times=None,
     x = model.initial_state(t0=scene.start_time)
     model.solver = "scipy"  # the reference is scipy's solve_ivp, independent of the FMU runtime
     model.integrator = method or model.choose_integrator(scene.start_time, x)
+    samples = _Samples(model, rec_map, recorder, times)
+    # DOP853's dense output (7th order) holds the tolerance between its steps: the record times
+    # are read from it, and the integration restarts only every SAMPLED_PER_RESTART record
+    # times (for the progress bar) and where an input table has a kink or a jump. Restarting
+    # at every record time cost 5 to 250 times the right-hand-side calls (the solver's steps
+    # are longer than the record interval); Radau's dense output is of lower order than its
+    # steps: with Radau it restarts at every record time.
+    dense = dense and model.integrator == "DOP853"
+    restarts = times[::SAMPLED_PER_RESTART] if dense else times
+    stops = sorted(set(restarts.tolist()) | {float(times[-1])} | set(input_breakpoints(scene)))
     t = scene.start_time
-    no_input = []
-    stops = sorted(set(times.tolist()) | set(input_breakpoints(scene)))
-    recorded = set(times.tolist())
+    no_input: list = []
     wall = time.perf_counter()
     for t_next in _progress(stops, progress, scene.name):
         if t_next > t:
-            x = model.advance(t, x, t_next - t, lambda s: no_input, rtol, atol)
+            x = model.advance(t, x, t_next - t, lambda s: no_input, rtol, atol,
+                              sample=samples if dense else None)
             t = t_next
-        if t_next in recorded:
-            recorder.add(t, rec_map.row(t, x))
+        samples.at_restart(t, x)
     return ReferenceResult(None, None, recorder, time.perf_counter() - wall, model.n_rhs, rtol,
                            model.integrator)
+
+
+SAMPLED_PER_RESTART = 100  # record times read from one integration's dense output
+
+
+class _Samples:
+    """The reference's rows: each record time once, in order, either at a restart (the state
+    the integration stopped with) or inside an integration (its dense output, the components'
+    discrete states of that stretch: ComposedModel.advance's `sample`). The state at a record
+    time is observed first (ComposedModel.observe), as a restart there would."""
+
+    def __init__(self, model: ComposedModel, rec_map: RecordMap, recorder: Recorder, times):
+        self.model, self.rec_map, self.recorder = model, rec_map, recorder
+        self.times, self.next = times.tolist(), 0
+
+    def __call__(self, t_from: float, t_to: float, state_at) -> None:
+        """Every record time in [t_from, t_to) from `state_at`."""
+        while self.next < len(self.times) and self.times[self.next] < t_to:
+            t = self.times[self.next]
+            x = np.asarray(state_at(t), dtype=float)
+            self.model.observe(t, x)
+            self._add(t, x)
+
+    def at_restart(self, t: float, x) -> None:
+        """The record times up to the restart time t (at most t itself), from its state."""
+        while self.next < len(self.times) and self.times[self.next] <= t:
+            self._add(self.times[self.next], x)
+
+    def _add(self, t: float, x) -> None:
+        self.recorder.add(t, self.rec_map.row(t, x))
+        self.next += 1
 
 
 def write_reference(scene: Scene, out: Path, result: ReferenceResult,

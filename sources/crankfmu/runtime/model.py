@@ -377,13 +377,16 @@ class PhysicsModel:
 
     def integrate(self, u_of_t: InputFunction, t: float, x, t_end: float, rtol: float, atol,
                   events=(), derivatives=None, dense: list | None = None,
-                  max_step: float = math.inf) -> Integration:
+                  max_step: float = math.inf, interpolant: list | None = None) -> Integration:
         """One integration from t to t_end (or the first terminal event) with the model's
         solver: the runtime's Dormand-Prince (default), or scipy's solve_ivp with the method in
         `integrator` (solver = "scipy": the cross-check, and the monolithic reference).
         derivatives: a right-hand side (t, x, u) other than the model's `derivatives` (a model
         that integrates part of its states in closed form); dense, max_step: the accepted
-        steps' dense output and the longest step (runtime solver only, see dopri.integrate)."""
+        steps' dense output and the longest step (runtime solver only, see dopri.integrate);
+        interpolant: a list to which the scipy path appends solve_ivp's dense output of this
+        integration (a callable of t; the monolithic reference samples its record times on
+        it)."""
         derivatives = derivatives or self.derivatives
         if getattr(u_of_t, "moving", True):
             def rhs(s, y):
@@ -397,7 +400,8 @@ class PhysicsModel:
             self._work_left
         try:
             if self.solver == "scipy":
-                sol = self._integrate_scipy(rhs, u_of_t, t, x, t_end, rtol, atol, events, limit)
+                sol = self._integrate_scipy(rhs, u_of_t, t, x, t_end, rtol, atol, events, limit,
+                                            interpolant)
             else:
                 sol = dopri.integrate(rhs, t, x, t_end, TOLERANCE_FACTOR * rtol,
                                       [TOLERANCE_FACTOR * a for a in dopri.per_state(atol,
@@ -411,7 +415,7 @@ class PhysicsModel:
         return sol
 
     def _integrate_scipy(self, rhs, u_of_t, t, x, t_end, rtol, atol, events,
-                         limit: int) -> Integration:
+                         limit: int, interpolant: list | None = None) -> Integration:
         calls = [0]
 
         def counted(s, y):
@@ -426,9 +430,11 @@ class PhysicsModel:
         options = {"jac": self._jac_for(u_of_t)} if self._has_jacobian() else {}
         sol = solve_ivp(counted, (t, t_end), np.asarray(x, dtype=float), method=self.integrator,
                         rtol=rtol, atol=np.asarray(atol, dtype=float), events=list(events) or None,
-                        **options)
+                        dense_output=interpolant is not None, **options)
         if sol.status < 0:
             raise IntegrationError(f"{self.model_name}: {sol.message} at t = {t:.9g} s")
+        if interpolant is not None:
+            interpolant.append(sol.sol)
         crossings = [(i, te, list(ye)) for i in range(len(events))
                      for te, ye in zip(sol.t_events[i], sol.y_events[i])
                      if not getattr(events[i], "terminal", False)]
