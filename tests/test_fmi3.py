@@ -297,6 +297,39 @@ def test_model_exchange_meets_a_lock_and_release_two_milliseconds_apart():
     assert np.max(np.abs(steps_run - steps_ref)) <= 1, (steps_run, steps_ref)
 
 
+def test_model_exchange_sets_an_input_only_when_its_value_changed(monkeypatch):
+    """Every right-hand side sets each FMU's connected inputs (the plan's, then every
+    component's): before, 62 % of these FMI calls (each into the FMU's Python) set the values
+    the FMU already held. Now an input set is skipped when the values equal those last set;
+    only the first sets after the initialization and each event iteration (which forget them)
+    may repeat: measured 11 of 7507 on the servo press over 0.3 s (19,864 sets before, 12,368
+    of them repeats), the same numbers bit for bit (a comparison over every shipped scene, the
+    commit's note)."""
+    import crankfmu
+    from crankfmu.system import wiring
+
+    sets: list = []
+    build = wiring.System.__init__
+
+    def recording(self, *args, **kwargs):
+        build(self, *args, **kwargs)
+        for comp, write in list(self.write_inputs.items()):
+            def record(values, comp=comp, write=write):
+                sets.append((comp, list(values)))
+                write(values)
+            self.write_inputs[comp] = record
+    monkeypatch.setattr(wiring.System, "__init__", recording)
+    scene = crankfmu.load_scene(ROOT / "scenarios" / "servo_press.toml")
+    scene.stop_time = 0.3
+    crankfmu.simulate(scene, algorithm="model-exchange", estimate=False)
+    last: dict = {}
+    repeats = 0
+    for comp, values in sets:
+        repeats += last.get(comp) == values
+        last[comp] = values
+    assert len(sets) > 1000 and repeats < 0.01 * len(sets), (repeats, len(sets))
+
+
 def test_model_exchange_master_refuses_an_fmi2_file(tmp_path, fmu_dir):
     """An FMU file without Model Exchange (pythonfmu's FMI 2.0): a clear error naming it."""
     import crankfmu

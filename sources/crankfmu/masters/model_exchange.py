@@ -198,6 +198,10 @@ class ModelExchange(Master):
         self._hold = 0.0       # s: the segment's start, where step tables are read
         self._held = None      # the step tables' values held in the last segment
         self._cache = (None, None, None)  # (t, y bytes, indicators)
+        # each component's connected inputs as _resolve last set them: a value the FMU holds
+        # already is not set again (about two of three sets at every evaluation; an FMI call
+        # each, into the FMU's Python); forgotten where something else may set them
+        self._written: dict[str, list] = {}
         self._first_step = None  # s: the step the solver proposed last (None: it chooses)
         self.counts = {"method": self.method, "rhs_evaluations": 0, "solver_steps": 0,
                        "state_events": 0, "input_events": 0}
@@ -221,10 +225,16 @@ class ModelExchange(Master):
         system = self.system
         self._external(t)
         for comp in self.plan:
-            system.write_inputs[comp](system.gather_inputs(comp))
+            self._write_inputs(comp)
             system.refresh_outputs(comp)
         for comp in system.order:
-            system.write_inputs[comp](system.gather_inputs(comp))
+            self._write_inputs(comp)
+
+    def _write_inputs(self, comp: str) -> None:
+        values = self.system.gather_inputs(comp)
+        if values != self._written.get(comp):
+            self.system.write_inputs[comp](values)
+            self._written[comp] = values
 
     def rhs(self, t: float, y: np.ndarray) -> np.ndarray:
         self.counts["rhs_evaluations"] += 1
@@ -254,6 +264,7 @@ class ModelExchange(Master):
         """The FMUs, at t and self.y, in event mode: discrete updates (twice: a mode change
         that moves outputs reaches the inputs it feeds), the states read back."""
         self._cache = (None, None, None)
+        self._written.clear()
         for _ in range(2):
             self._resolve(t)
             for part in self.parts:
@@ -345,6 +356,7 @@ class ModelExchange(Master):
     # -- the master contract -----------------------------------------------------------------
     def initialize(self, t0: float) -> None:
         super().initialize(t0)  # every FMU leaves initialization in event mode (FMI 3.0)
+        self._written.clear()  # the base class set the inputs
         system = self.system
         self._hold = t0
         for part in self.parts:
@@ -358,6 +370,10 @@ class ModelExchange(Master):
         self.history = History()  # the point at t0 after the initial event iteration
         self._remember(t0)
         self.method = self.counts["method"] = integration_method(self.rhs, t0, self.y)
+
+    def restore_states(self, states: dict, comps=None) -> None:
+        super().restore_states(states, comps)
+        self._written.clear()  # a restored FMU holds the inputs it was saved with
 
     def _step_table_values(self, t: float) -> list:
         return [s.value_at(edge_reading_time(t)) for _, _, signals in self.varying
