@@ -443,8 +443,10 @@ STATE_CASES = {  # model: (start values, step [s], steps before the save, steps 
 
 
 def _state_runs(mode: str, cases: dict) -> dict:
-    done = subprocess.run([sys.executable, "-c", STATE_SCRIPT, mode, json.dumps(cases)],
-                          capture_output=True, text=True, timeout=600)
+    """STATE_SCRIPT in a new process (tests/support/fresh_python.py: a fork of a server that
+    has only imported numpy and fmpy; the saving and the restoring process share nothing)."""
+    from tests.support import fresh_python
+    done = fresh_python.run(STATE_SCRIPT, [mode, json.dumps(cases)], cwd=ROOT, timeout=600)
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     return json.loads(done.stdout.splitlines()[-1])
 
