@@ -330,6 +330,34 @@ def test_model_exchange_sets_an_input_only_when_its_value_changed(monkeypatch):
     assert len(sets) > 1000 and repeats < 0.01 * len(sets), (repeats, len(sets))
 
 
+def test_model_exchange_puts_the_fmus_at_a_point_once(monkeypatch):
+    """The event functions are asked for at each solver step's end, where the solver has just
+    evaluated its last stage: before, the master set every FMU's time and states (and resolved
+    the couplings) there again, 2378 of 9916 sets on the servo press over 0.3 s. Now a point
+    the FMUs are at is not set again; only the first point after an event iteration (whose
+    discrete updates may move the outputs) may repeat: measured 4 of 7542, the same numbers
+    bit for bit."""
+    import crankfmu
+    from crankfmu.masters import model_exchange
+
+    points: list = []
+    set_point = model_exchange.MePart.set_time_and_states
+
+    def recording(self, t, y):
+        points.append((self.comp, t, y.tobytes()))
+        set_point(self, t, y)
+    monkeypatch.setattr(model_exchange.MePart, "set_time_and_states", recording)
+    scene = crankfmu.load_scene(ROOT / "scenarios" / "servo_press.toml")
+    scene.stop_time = 0.3
+    crankfmu.simulate(scene, algorithm="model-exchange", estimate=False)
+    last: dict = {}
+    repeats = 0
+    for comp, t, y in points:
+        repeats += last.get(comp) == (t, y)
+        last[comp] = (t, y)
+    assert len(points) > 1000 and repeats < 0.01 * len(points), (repeats, len(points))
+
+
 def test_model_exchange_master_refuses_an_fmi2_file(tmp_path, fmu_dir):
     """An FMU file without Model Exchange (pythonfmu's FMI 2.0): a clear error naming it."""
     import crankfmu

@@ -202,6 +202,12 @@ class ModelExchange(Master):
         # already is not set again (about two of three sets at every evaluation; an FMI call
         # each, into the FMU's Python); forgotten where something else may set them
         self._written: dict[str, list] = {}
+        # (t, states' bytes, step tables' time) the FMUs were last put at by _evaluate: asked
+        # for the same point again (the event functions at a step's end, where the solver
+        # evaluated its last stage: about one evaluation in five), they are there already
+        self._evaluated: tuple | None = None
+        self._step_tables = any(s.interpolation == "step" for _, _, signals in self.varying
+                                for s in signals)  # inputs read at self._hold
         self._first_step = None  # s: the step the solver proposed last (None: it chooses)
         self.counts = {"method": self.method, "rhs_evaluations": 0, "solver_steps": 0,
                        "state_events": 0, "input_events": 0}
@@ -215,9 +221,13 @@ class ModelExchange(Master):
 
     def _evaluate(self, t: float, y: np.ndarray) -> None:
         """Every FMU at (t, its states), the couplings resolved."""
+        point = (t, y.tobytes(), self._hold if self._step_tables else None)
+        if point == self._evaluated:
+            return
         for part in self.parts:
             part.set_time_and_states(t, y)
         self._resolve(t)
+        self._evaluated = point
 
     def _resolve(self, t: float) -> None:
         """The inputs at t: external ones, and the connected outputs read in plan order and
@@ -265,6 +275,7 @@ class ModelExchange(Master):
         that moves outputs reaches the inputs it feeds), the states read back."""
         self._cache = (None, None, None)
         self._written.clear()
+        self._evaluated = None  # the discrete updates may move outputs: evaluate again
         for _ in range(2):
             self._resolve(t)
             for part in self.parts:
@@ -357,6 +368,7 @@ class ModelExchange(Master):
     def initialize(self, t0: float) -> None:
         super().initialize(t0)  # every FMU leaves initialization in event mode (FMI 3.0)
         self._written.clear()  # the base class set the inputs
+        self._evaluated = None
         system = self.system
         self._hold = t0
         for part in self.parts:
@@ -374,6 +386,7 @@ class ModelExchange(Master):
     def restore_states(self, states: dict, comps=None) -> None:
         super().restore_states(states, comps)
         self._written.clear()  # a restored FMU holds the inputs it was saved with
+        self._evaluated = None
 
     def _step_table_values(self, t: float) -> list:
         return [s.value_at(edge_reading_time(t)) for _, _, signals in self.varying
