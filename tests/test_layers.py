@@ -11,6 +11,7 @@ those inside functions (a lazy import is still a dependency)."""
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 import pytest
@@ -32,7 +33,7 @@ def imports(path: Path) -> set[str]:
     name = module_name(path)
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
     found = set()
-    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+    for node in ast.walk(parsed(path)):
         if isinstance(node, ast.ImportFrom):
             if node.level:
                 base = package.split(".") if package else []
@@ -51,8 +52,19 @@ def imports(path: Path) -> set[str]:
     return found - {name}
 
 
+@functools.cache
+def parsed(path: Path) -> ast.Module:
+    return ast.parse(path.read_text(), str(path))
+
+
 MODULES = {module_name(p): p for p in PACKAGE.rglob("*.py")}
-GRAPH = {name: imports(path) for name, path in MODULES.items()}
+
+
+@functools.cache
+def graph() -> dict[str, set[str]]:
+    """module -> the modules it imports; parsed when a test first asks (0.8 s of CPU: made at
+    import, it was paid by every test process as it collected the tests)."""
+    return {name: imports(path) for name, path in MODULES.items()}
 
 
 def top(name: str) -> str:
@@ -64,7 +76,7 @@ def test_every_top_level_package_has_a_layer():
 
 
 def test_no_import_points_up_a_layer():
-    upward = [f"{m} -> {d}" for m, deps in GRAPH.items() for d in deps
+    upward = [f"{m} -> {d}" for m, deps in graph().items() for d in deps
               if RANK[top(d)] > RANK[top(m)]]
     assert not upward, "imports pointing up a layer:\n" + "\n".join(sorted(upward))
 
@@ -73,7 +85,7 @@ def test_runtime_and_models_import_only_what_their_fmus_bundle():
     """runtime: itself; a model folder: the runtime and itself (fmu/build.py bundles exactly
     that); the registry models/catalog.py is not bundled and may import any model."""
     wrong = []
-    for m, deps in GRAPH.items():
+    for m, deps in graph().items():
         if top(m) == "runtime":
             wrong += [f"{m} -> {d}" for d in deps if top(d) != "runtime"]
         elif top(m) == "models" and m.count(".") >= 1 and m != "models.catalog":
@@ -116,7 +128,7 @@ def strongly_connected(graph: dict[str, set[str]]) -> list[list[str]]:
 
 
 def test_no_import_cycle():
-    cycles = strongly_connected(GRAPH)
+    cycles = strongly_connected(graph())
     assert not cycles, "import cycles: " + "; ".join(" <-> ".join(c) for c in cycles)
 
 
@@ -124,7 +136,7 @@ def test_the_checker_sees_a_cycle_and_an_upward_import():
     """The checks above can fail: a made-up graph with a cycle is caught, and the real graph
     holds imports the rank table orders (runtime is imported from above)."""
     assert strongly_connected({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
-    assert any(top(d) == "runtime" and top(m) != "runtime" for m, deps in GRAPH.items()
+    assert any(top(d) == "runtime" and top(m) != "runtime" for m, deps in graph().items()
                for d in deps)
 
 
@@ -139,7 +151,7 @@ def test_one_place_maps_errors_to_exit_status_2():
     """Every user error derives from crankfmu.errors.CrankfmuError and cli.main alone turns it
     into `error: ...` and exit 2: no command returns 2 on its own or catches its own error."""
     own_exits = [f"{m}:{node.lineno}" for m, path in MODULES.items() if m != "cli"
-                 for node in ast.walk(ast.parse(path.read_text()))
+                 for node in ast.walk(parsed(path))
                  if isinstance(node, ast.Return) and isinstance(node.value, ast.Constant)
                  and node.value.value == 2]
     assert not own_exits, own_exits
@@ -164,7 +176,7 @@ def test_cli_and_the_commands_do_not_import_each_other():
     """cli.py builds the parser and dispatches, naming each command's module (importlib); the
     commands take their shared options from commands/options.py. Before: 18 imports between
     cli.py and commands/, both ways, and run and build lived in cli.py."""
-    both_ways = [f"{m} -> {d}" for m, deps in GRAPH.items() for d in deps
+    both_ways = [f"{m} -> {d}" for m, deps in graph().items() for d in deps
                  if (m == "cli" and top(d) == "commands") or (top(m) == "commands" and d == "cli")]
     assert both_ways == []
     from crankfmu.cli import COMMANDS
