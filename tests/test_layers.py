@@ -17,9 +17,9 @@ from pathlib import Path
 import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "sources" / "crankfmu"
-LAYERS = (("runtime", "version"), ("models",), ("errors", "outputs"), ("fmu",), ("masters",), ("system",),
-          ("cosim",),
-          ("monolithic", "interop"), ("studies",), ("commands", "cli", "api", "__main__", ""))
+LAYERS = (("runtime", "version"), ("models",), ("errors", "outputs"), ("fmu",), ("masters",),
+          ("system",), ("cosim",), ("monolithic", "interop"), ("studies",),
+          ("commands", "cli", "api", "__main__", ""))
 RANK = {top: rank for rank, tops in enumerate(LAYERS) for top in tops}
 
 
