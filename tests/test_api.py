@@ -98,7 +98,8 @@ def test_steady_state_plot_with_the_reference(tmp_path, fmu_dir):
 
     import crankfmu
     backend = matplotlib.get_backend()
-    run = crankfmu.simulate(SERVO, stop_time=1.3, fmu_dir=fmu_dir)
+    run = crankfmu.simulate(SERVO, stop_time=1.3, fmu_dir=fmu_dir,
+                            estimate=False)  # the plot draws no estimate: no companion
     ref = crankfmu.reference(SERVO, stop_time=1.3, rtol=1e-8)
     fig = run.plot(steady=True, reference=ref)
     assert matplotlib.get_backend() == backend
