@@ -116,12 +116,17 @@ def solve_reference(scene: Scene, rtol: float = DEFAULT_RTOL, times=None,
     t = scene.start_time
     no_input: list = []
     wall = time.perf_counter()
-    for t_next in _progress(stops, progress, scene.name):
+    bar = _progress(len(times), progress, scene.name)
+    for t_next in stops:
         if t_next > t:
             x = model.advance(t, x, t_next - t, lambda s: no_input, rtol, atol,
                               sample=samples if dense else None)
             t = t_next
         samples.at_restart(t, x)
+        if bar is not None:
+            bar.update(samples.next - bar.n)
+    if bar is not None:
+        bar.close()
     return ReferenceResult(None, None, recorder, time.perf_counter() - wall, model.n_rhs, rtol,
                            model.integrator)
 
@@ -174,9 +179,10 @@ def write_reference(scene: Scene, out: Path, result: ReferenceResult,
     return result
 
 
-def _progress(items, enabled, label):
+def _progress(points: int, enabled, label):
+    """A bar over the record points (None when `enabled` is False)."""
     if enabled is False:
-        return items
+        return None
     from ..cosim.runner import progress_bar
-    return progress_bar(items, desc=f"{label} reference", unit="pt", mininterval=0.5,
+    return progress_bar(total=points, desc=f"{label} reference", unit="pt", mininterval=0.5,
                         leave=False, disable=None if enabled is None else False)
