@@ -189,9 +189,8 @@ def press_steady_revolution(press, motor, u0: float, revolutions: int = 3,
     mean speed with the motor in equilibrium; the last of `revolutions` revolutions on n crank
     angles. The slow mode J0/s ~ 0.02 s falls by e^-18 in a revolution (0.37 s): 2, 3, 4, 5 and
     8 revolutions give the same last revolution to 1e-8 of its speed (the base-link sweep's
-    delta to 1.1e-8 between 3 and 6, which took 1.5 x the CPU). Caveat: the integration steps
-    across the forging window's edges (kinks of the load) without locating them, so where its
-    steps fall there moves the result by up to 1e-6 of the speed (6 and 12 revolutions did).
+    delta to 1.1e-8 between 3 and 6, which took 1.5 x the CPU). The integration restarts at the
+    forging window's edges (_across_forging_edges).
     A `crank_mass` enters through the same port as the motor: its inertia / i^2 added to
     flange_J, its weight moment / i to flange_tau (the press reduces them back to the crank)."""
     from scipy.integrate import solve_ivp
@@ -218,23 +217,49 @@ def press_steady_revolution(press, motor, u0: float, revolutions: int = 3,
     w0 = pa.mean_speed(pa.ReducedDrive.from_models(press, motor, u0))
     x0 = [0.0, w0] + list(motor.initial_state(motor_u(0.0, w0)))
     t_end = (revolutions + 0.5) * TWO_PI / w0
-    sol = solve_ivp(rhs, (0.0, t_end), x0, method="DOP853", rtol=rtol, atol=1e-10,
-                    dense_output=True)
-    if not sol.success:
-        raise RuntimeError(f"press simulation failed: {sol.message}")
+    solution = _across_forging_edges(
+        lambda t, x: solve_ivp(rhs, (t, t_end), x, method="DOP853", rtol=rtol, atol=1e-10,
+                               dense_output=True, events=_edges(press, x) or None), x0)
     K = revolutions - 1
 
     def t_at(phi):
-        return brentq(lambda t: sol.sol(t)[0] - phi, 0.0, t_end, xtol=1e-14, rtol=1e-15)
+        return brentq(lambda t: solution(t)[0] - phi, 0.0, t_end, xtol=1e-14, rtol=1e-15)
     t0, t1 = t_at(TWO_PI * K), t_at(TWO_PI * (K + 1))
     theta = TWO_PI * np.arange(n) / n
     # phi(t) is monotonic: invert it on a fine grid, then polish each time by Newton (w = phi')
     t_fine = np.linspace(t0, t1, 20 * n)
-    t = np.interp(theta + TWO_PI * K, sol.sol(t_fine)[0], t_fine)
+    t = np.interp(theta + TWO_PI * K, solution(t_fine)[0], t_fine)
     for _ in range(3):
-        x = sol.sol(t)
+        x = solution(t)
         t = t - (x[0] - (theta + TWO_PI * K)) / x[1]
-    return PressRevolution(theta, t - t0, sol.sol(t)[1], t1 - t0)
+    return PressRevolution(theta, t - t0, solution(t)[1], t1 - t0)
+
+
+def _edges(press, x) -> list:
+    """The press's forging-window edges around the crank angle x[0] (terminal events: where
+    the load has a kink; none without the forging load), as its FMU locates them."""
+    press.restart_state = (x[0], x[1])
+    return press.event_functions(None)
+
+
+def _across_forging_edges(integrate, x0):
+    """One dense solution from integrate(t, x) (a solve_ivp with dense output and terminal
+    events) restarted at each event up to its end: the solver steps across no kink of the load.
+    Stepping across them, where the steps fell moved the steady revolution by up to 1e-6 of
+    its speed (its last revolution of 6 or 12 against 2, 3, 4, 5 or 8)."""
+    from scipy.integrate import OdeSolution
+
+    t, x, pieces = 0.0, list(x0), []
+    while True:
+        sol = integrate(t, x)
+        if not sol.success:
+            raise RuntimeError(f"press simulation failed: {sol.message}")
+        pieces.append(sol.sol)
+        if sol.status == 0:
+            break
+        t, x = float(sol.t[-1]), list(sol.y[:, -1])
+    ts = np.concatenate([pieces[0].ts] + [p.ts[1:] for p in pieces[1:]])
+    return OdeSolution(ts, [i for p in pieces for i in p.interpolants])
 
 
 # =============================================================================================
