@@ -219,7 +219,8 @@ def press_steady_revolution(press, motor, u0: float, revolutions: int = 3,
     t_end = (revolutions + 0.5) * TWO_PI / w0
     solution = _across_forging_edges(
         lambda t, x: solve_ivp(rhs, (t, t_end), x, method="DOP853", rtol=rtol, atol=1e-10,
-                               dense_output=True, events=_edges(press, x) or None), x0)
+                               dense_output=True, events=_edges(press, x) or None),
+        x0, t_end)
     K = revolutions - 1
 
     def t_at(phi):
@@ -238,13 +239,15 @@ def press_steady_revolution(press, motor, u0: float, revolutions: int = 3,
 def _edges(press, x) -> list:
     """The press's forging-window edges around the crank angle x[0] (terminal events: where
     the load has a kink; none without the forging load), as its FMU locates them."""
+    if press.on("driven_crank"):  # no crank states of its own: a driver's edges, not these
+        return []
     press.restart_state = (x[0], x[1])
     return press.event_functions(None)
 
 
-def _across_forging_edges(integrate, x0):
-    """One dense solution from integrate(t, x) (a solve_ivp with dense output and terminal
-    events) restarted at each event up to its end: the solver steps across no kink of the load.
+def _across_forging_edges(integrate, x0, t_end: float):
+    """One dense solution from integrate(t, x) (a solve_ivp to t_end with dense output and
+    terminal events) restarted at each event: the solver steps across no kink of the load.
     Stepping across them, where the steps fell moved the steady revolution by up to 1e-6 of
     its speed (its last revolution of 6 or 12 against 2, 3, 4, 5 or 8)."""
     from scipy.integrate import OdeSolution
@@ -255,7 +258,7 @@ def _across_forging_edges(integrate, x0):
         if not sol.success:
             raise RuntimeError(f"press simulation failed: {sol.message}")
         pieces.append(sol.sol)
-        if sol.status == 0:
+        if sol.status == 0 or sol.t[-1] >= t_end:  # an edge at the very end: done too
             break
         t, x = float(sol.t[-1]), list(sol.y[:, -1])
     ts = np.concatenate([pieces[0].ts] + [p.ts[1:] for p in pieces[1:]])
