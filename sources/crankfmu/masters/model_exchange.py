@@ -240,6 +240,12 @@ class ModelExchange(Master):
         for comp in system.order:
             self._write_inputs(comp)
 
+    def _forget_what_the_fmus_hold(self) -> None:
+        """Where something other than _evaluate and _resolve moves the FMUs (initialization,
+        discrete updates, a state restore): the next evaluation sets every input and point."""
+        self._written.clear()
+        self._evaluated = None
+
     def _write_inputs(self, comp: str) -> None:
         values = self.system.gather_inputs(comp)
         if values != self._written.get(comp):
@@ -274,8 +280,7 @@ class ModelExchange(Master):
         """The FMUs, at t and self.y, in event mode: discrete updates (twice: a mode change
         that moves outputs reaches the inputs it feeds), the states read back."""
         self._cache = (None, None, None)
-        self._written.clear()
-        self._evaluated = None  # the discrete updates may move outputs: evaluate again
+        self._forget_what_the_fmus_hold()  # the discrete updates may move outputs
         for _ in range(2):
             self._resolve(t)
             for part in self.parts:
@@ -367,8 +372,7 @@ class ModelExchange(Master):
     # -- the master contract -----------------------------------------------------------------
     def initialize(self, t0: float) -> None:
         super().initialize(t0)  # every FMU leaves initialization in event mode (FMI 3.0)
-        self._written.clear()  # the base class set the inputs
-        self._evaluated = None
+        self._forget_what_the_fmus_hold()  # the base class set the inputs
         system = self.system
         self._hold = t0
         for part in self.parts:
@@ -385,8 +389,7 @@ class ModelExchange(Master):
 
     def restore_states(self, states: dict, comps=None) -> None:
         super().restore_states(states, comps)
-        self._written.clear()  # a restored FMU holds the inputs it was saved with
-        self._evaluated = None
+        self._forget_what_the_fmus_hold()  # a restored FMU holds what it was saved with
 
     def _step_table_values(self, t: float) -> list:
         return [s.value_at(edge_reading_time(t)) for _, _, signals in self.varying
