@@ -1,4 +1,5 @@
-"""Shared fixtures: the FMUs are built once per test session into a temporary folder."""
+"""Shared fixtures: the catalog's FMUs, made once per test session (the repository's fmus/ brought
+up to date and copied into a temporary folder), and the order of the test files on the workers."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -43,69 +44,54 @@ def pytest_collection_finish(session) -> None:
 
 def pytest_unconfigure(config) -> None:
     import shutil
-    building = getattr(config, "_crankfmu_catalog_thread", None)
-    if building is not None:  # not removed while it is written
-        building.join()
     for folder in (getattr(config, "_crankfmu_cache", None),
                    getattr(config, "_crankfmu_catalog", None)):
         if folder:
             shutil.rmtree(folder, ignore_errors=True)
 
 
-# The controller's catalog: <a temporary folder>/fmus (its FMI 3.0 FMUs in fmus/fmi3/), and
-# beside fmus/, when the build is done, one of these files
-CATALOG_BUILT, CATALOG_FAILED = "built", "failed"
-
-
 def pytest_sessionstart(session) -> None:
     """With pytest-xdist (pyproject.toml's addopts: one worker process per core, whole test files
-    per worker), the controller brings the repository's fmus/ up to date before the workers
-    start. Scenes run without --fmus build their FMUs there on first use: two workers meeting a
-    missing FMU at once would both build it (each renames its own whole file over the target,
-    so readers are safe, but the work is done twice). It also builds the session's catalog
-    (fmu_dir, fmi3_dir) once for every worker (each worker built its own: 4 s of CPU each),
-    without fmpy validate: that is tests/test_fmu_build.py's, per FMU, on the workers (it is
-    1.4 of the build's 4.0 s of CPU, measured 2026-11-26). The catalog is built in a thread
-    while the workers start and collect (they waited for it: 4 s on an idle machine, 7 s on a
-    loaded one); a worker's fmu_dir waits for the file CATALOG_BUILT (or CATALOG_FAILED, with
-    what the build said) beside it. Serially nothing changes: the first test that needs an FMU
-    builds it."""
+    per worker), the controller makes the session's catalog (fmu_dir, fmi3_dir) before the
+    workers start, for all of them: each worker built its own (4 s of CPU each), then the
+    controller built it in a thread while the workers started (1.6 s of CPU, and the first test
+    to need it waited up to 1.4 s). Serially the fixtures make it. Either way it is the
+    repository's fmus/ and fmus/fmi3/ brought up to date (_catalog)."""
     config = session.config
     if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
         return
     import tempfile
-    import threading
 
+    config._crankfmu_catalog = tempfile.mkdtemp(prefix="crankfmu-test-catalog-")  # gone at
+    _catalog(Path(config._crankfmu_catalog) / "fmus")  # unconfigure
+
+
+def _catalog(dest: Path) -> Path:
+    """Every catalog model's FMI 2.0 FMU in dest and FMI 3.0 FMU (default effects) in
+    dest/fmi3/: copies of the repository's fmus/ and fmus/fmi3/ once those are current, each
+    built there first if missing or stale, as a scene's run does (system/wiring.resolve_fmu).
+    Scenes run without --fmus use those files; with the copies, no test can change what
+    another reads. The builds are the same bytes wherever they are written (fmpy validate
+    checks them in tests/test_fmu_build.py)."""
+    import shutil
+
+    from crankfmu.fmu import build_fmi3
     from crankfmu.fmu.build import build_fmu, rebuild_reason
     from crankfmu.models.catalog import FMU_MODELS
 
+    repository = ROOT / "fmus"
     for model in FMU_MODELS:
-        if rebuild_reason(ROOT / "fmus" / f"{model}.fmu", model) is not None:  # as resolve_fmu
-            build_fmu(model, ROOT / "fmus")
-    config._crankfmu_catalog = tempfile.mkdtemp(prefix="crankfmu-test-catalog-")  # fmus/ and
-    config._crankfmu_catalog_thread = threading.Thread(  # the markers; gone at unconfigure
-        target=_build_catalog, args=(Path(config._crankfmu_catalog),), daemon=True)
-    config._crankfmu_catalog_thread.start()
-
-
-def _build_catalog(root: Path) -> None:
-    """Every catalog model's FMI 2.0 and FMI 3.0 FMU into root/fmus (FMI 3.0 in its fmi3/, as
-    build_all and build_all3 without fmpy validate), then root/CATALOG_BUILT; CATALOG_FAILED
-    with the traceback if a build fails."""
-    import traceback
-
-    from crankfmu.fmu.build import build_fmu
-    from crankfmu.fmu.build_fmi3 import FMI3_DIR, build_fmu3
-    from crankfmu.models.catalog import FMU_MODELS
-    try:
-        for model in FMU_MODELS:
-            build_fmu(model, root / "fmus")
-        for model in FMU_MODELS:
-            build_fmu3(model, root / "fmus" / FMI3_DIR)
-    except BaseException:  # noqa: BLE001 - said by every test that needs the catalog
-        (root / CATALOG_FAILED).write_text(traceback.format_exc())
-        return
-    (root / CATALOG_BUILT).touch()
+        effects = build_fmi3.variant(model, None)
+        fmi3 = build_fmi3.fmu_path(model, repository, effects)
+        if rebuild_reason(repository / f"{model}.fmu", model) is not None:
+            build_fmu(model, repository)
+        if rebuild_reason(fmi3, model, 3,
+                          build_fmi3.current_build_id(model, effects)) is not None:
+            build_fmi3.build_fmu3(model, fmi3.parent, effects)
+        (dest / build_fmi3.FMI3_DIR).mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(repository / f"{model}.fmu", dest / f"{model}.fmu")
+        shutil.copyfile(fmi3, dest / build_fmi3.FMI3_DIR / fmi3.name)
+    return dest
 
 
 @pytest.hookimpl(optionalhook=True)
@@ -114,51 +100,30 @@ def pytest_configure_node(node) -> None:
     node.workerinput["crankfmu_catalog"] = getattr(node.config, "_crankfmu_catalog", None)
 
 
-def _controller_catalog(config) -> Path | None:
-    """The controller's catalog (pytest_sessionstart) in an xdist worker once it is built (a
-    failed build fails the test that asked, with the build's traceback), else None."""
-    import time
-
-    built = getattr(config, "workerinput", {}).get("crankfmu_catalog")
-    if not built:
-        return None
-    root = Path(built)
-    while not (root / CATALOG_BUILT).exists():
-        if (root / CATALOG_FAILED).exists():
-            pytest.fail("the controller's build of the session's FMU catalog failed:\n"
-                        + (root / CATALOG_FAILED).read_text(), pytrace=False)
-        time.sleep(0.05)
-    return root / "fmus"
+@pytest.fixture(scope="session")
+def catalog_dir(request, tmp_path_factory) -> Path:
+    """The session's catalog (_catalog): the controller's with pytest-xdist, else made here."""
+    made = getattr(request.config, "workerinput", {}).get("crankfmu_catalog")
+    if made:  # complete: made before the workers started
+        return Path(made) / "fmus"
+    return _catalog(tmp_path_factory.mktemp("catalog") / "fmus")
 
 
 @pytest.fixture(scope="session")
-def fmu_dir(request, tmp_path_factory) -> Path:
-    """Every FMU of the catalog, built once for the session (the test modules used to build
-    their own, 17 builds of up to 9 FMUs): the controller's with pytest-xdist, else built here.
-    fmpy validate checks them in tests/test_fmu_build.py. Tests only read these files: a test
-    that needs other builds makes them in its own folder."""
-    from crankfmu.fmu.build import build_all
-
-    built = _controller_catalog(request.config)
-    if built:
-        return built
-    dest = tmp_path_factory.mktemp("fmus")
-    build_all(dest, check=False)
-    return dest
+def fmu_dir(catalog_dir) -> Path:
+    """Every FMI 2.0 FMU of the catalog, made once for the session (the test modules used to
+    build their own, 17 builds of up to 9 FMUs). Tests only read these files: a test that needs
+    other builds makes them in its own folder."""
+    return catalog_dir
 
 
 @pytest.fixture(scope="session")
-def fmi3_dir(request, tmp_path_factory) -> Path:
+def fmi3_dir(catalog_dir) -> Path:
     """Every catalog model's FMI 3.0 FMU (Co-Simulation and Model Exchange, default effects),
-    built once for the session (as fmu_dir; fmpy validate in tests/test_fmu_build.py)."""
-    from crankfmu.fmu.build_fmi3 import FMI3_DIR, build_all3
+    made once for the session (as fmu_dir)."""
+    from crankfmu.fmu.build_fmi3 import FMI3_DIR
 
-    built = _controller_catalog(request.config)
-    if built:
-        return built / FMI3_DIR
-    dest = tmp_path_factory.mktemp("fmus")
-    build_all3(dest, check=False)
-    return dest / FMI3_DIR
+    return catalog_dir / FMI3_DIR
 
 
 # -- pytest-xdist: which worker runs what, and in which order ------------------------------------
