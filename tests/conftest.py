@@ -13,6 +13,9 @@ SCENARIOS = ROOT / "scenarios"
 def pytest_configure(config) -> None:
     """The FMUs the tests load unpack into a cache of this test run (crankfmu.fmu.archive), not
     the user's; the processes the tests start inherit it (xdist's workers: the controller's).
+    The process's fork server (tests/support/fresh_python.py, and crankfmu's worker pools in a
+    process that runs other threads, as pytest-xdist's workers do) imports fresh_python's
+    PRELOAD as it starts.
 
     OpenBLAS runs on one thread (unless OPENBLAS_NUM_THREADS says otherwise), set before numpy
     loads it, for this process and every process the tests start: the tests' matrices are a
@@ -26,6 +29,8 @@ def pytest_configure(config) -> None:
     if "CRANKFMU_CACHE_DIR" not in os.environ:
         os.environ["CRANKFMU_CACHE_DIR"] = config._crankfmu_cache = tempfile.mkdtemp(
             prefix="crankfmu-test-fmus-")
+    from tests.support import fresh_python
+    fresh_python.declare_preload()  # the fork server's imports, whoever starts it first
 
 
 def pytest_collection_finish(session) -> None:
@@ -178,6 +183,21 @@ def catalog(fmu_dir) -> dict[str, Path]:
     from crankfmu.models.catalog import FMU_MODELS
 
     return {model: fmu_dir / f"{model}.fmu" for model in FMU_MODELS}
+
+
+@pytest.fixture
+def short_tmp():
+    """An empty folder with a short path, for a process's temporary folder (TMPDIR) where its
+    workers may come from a fork server: the server's socket lies there, and AF_UNIX takes 108
+    bytes of path at most (pytest's tmp_path is too long: the workers were then spawned,
+    cosim/workers.py). In a folder of its own under /tmp where that exists (what a test puts
+    beside it goes there too), removed after the test."""
+    import shutil
+    import tempfile
+    root = Path(tempfile.mkdtemp(prefix="ck-", dir="/tmp" if Path("/tmp").is_dir() else None))
+    (root / "t").mkdir()
+    yield root / "t"
+    shutil.rmtree(root, ignore_errors=True)
 
 
 @pytest.fixture

@@ -9,6 +9,7 @@ from __future__ import annotations
 import copy
 import json
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -108,8 +109,8 @@ def run_pool_script(script: str, tmp: Path, start_method: str):
     return done
 
 
-@pytest.mark.parametrize("start_method", ["fork", "spawn"])
-def test_workers_that_the_pool_ends_remove_their_folders(tmp_path, start_method):
+@pytest.mark.parametrize("start_method", ["fork", "forkserver", "spawn"])
+def test_workers_that_the_pool_ends_remove_their_folders(short_tmp, start_method):
     """When a worker dies (here SIGKILL), the pool ends the others with SIGTERM, whose default
     action runs no exit handler: before, they left their temporary folders. The killed worker
     removes nothing: its folders (its worker folder, its privately unpacked FMUs) are removed
@@ -139,16 +140,17 @@ def test_workers_that_the_pool_ends_remove_their_folders(tmp_path, start_method)
         "        time.sleep(0.05)\n"
         "import pathlib, tempfile\n"
         "print(sorted(p.name for p in pathlib.Path(tempfile.gettempdir()).iterdir()))\n")
-    done = run_pool_script(script, tmp_path, start_method)
+    done = run_pool_script(script, short_tmp, start_method)
     broken = done.stdout.splitlines()[0]
     assert broken == "BrokenProcessPool"
     # the folders left before the parent's exit (at its exit it removes its own)
     assert done.stdout.splitlines()[1] == "[]", done.stdout
-    assert list(tmp_path.iterdir()) == [], [p.name for p in tmp_path.iterdir()]
+    assert list(short_tmp.iterdir()) == [], [p.name for p in short_tmp.iterdir()]
 
 
 @pytest.mark.parametrize("start_method", ["fork", "spawn"])
-def test_workers_of_a_closed_pool_leave_no_folder_and_not_the_parents(tmp_path, start_method):
+def test_workers_of_a_closed_pool_leave_no_folder_and_not_the_parents(short_tmp,
+                                                                       start_method):
     """A pool closed as a study ends: its workers remove their own temporary folders, and a
     forked worker leaves its parent's alone. Before the start method was chosen, a forked
     worker would have left its folders (it exits without running atexit's handlers), or
@@ -165,20 +167,56 @@ def test_workers_of_a_closed_pool_leave_no_folder_and_not_the_parents(tmp_path, 
         "pool.close()\n"
         "import os\n"
         "print(mine, os.path.isdir(mine), len({pid for pid, _ in workers}))\n")
-    done = run_pool_script(script, tmp_path, start_method)
+    done = run_pool_script(script, short_tmp, start_method)
     mine, kept, workers = done.stdout.split()
     assert kept == "True" and workers == "2"  # the parent's folder outlived the pool
     # at the parent's exit its own folder goes too: nothing is left
-    assert list(tmp_path.iterdir()) == [], [p.name for p in tmp_path.iterdir()]
+    assert list(short_tmp.iterdir()) == [], [p.name for p in short_tmp.iterdir()]
+
+
+def worker_environment(name: str) -> tuple[str, str | None, str]:
+    """In a pool worker: how it was started (its process's name), the variable `name` and the
+    temporary folder."""
+    import multiprocessing
+    import tempfile
+    return (multiprocessing.current_process().name.split("-")[0], os.environ.get(name),
+            tempfile.gettempdir())
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the fork server: Linux")
+def test_a_fork_servers_workers_take_the_environment_the_parent_has_now(short_tmp):
+    """The fork server keeps the environment of its start (the first pool's); a later pool's
+    workers must have the parent's of their own start, as forked and spawned ones do: a
+    changed temporary folder (where the workers put their folders, and the parent looks for
+    those of killed workers) and a variable set since (crankfmu's cache folder, say)."""
+    later = short_tmp / "later"
+    later.mkdir()
+    script = (
+        "import os\n"
+        "from crankfmu.cosim.workers import new_pool, close_pool\n"
+        "from tests.test_executor import worker_environment\n"
+        "def ask():\n"
+        "    pool, lifeline = new_pool(1)\n"
+        "    try:\n"
+        "        return pool.submit(worker_environment, 'CRANKFMU_PROBE').result()\n"
+        "    finally:\n"
+        "        close_pool(pool, lifeline)\n"
+        "first = ask()\n"
+        f"os.environ['TMPDIR'] = {str(later)!r}\n"
+        "os.environ['CRANKFMU_PROBE'] = 'set since'\n"
+        "print(*first, *ask())\n")
+    done = run_pool_script(script, short_tmp, "forkserver")
+    assert done.stdout.split() == ["ForkServerProcess", "None", str(short_tmp),
+                                   "ForkServerProcess", "set", "since", str(later)], done.stdout
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="forked workers: Linux")
 def test_workers_are_forked_unless_an_fmu_call_failed_or_a_thread_runs(tmp_path, fmu_dir):
-    """start_method: fork from a process that runs one thread, after a run too; spawn while
-    another thread runs (a copy could inherit a lock that thread holds) and after an FMU call
-    failed in the process (a pythonfmu binary can leave the interpreter that ran an exception
-    inside it corrupt: a copy would inherit that). The failure is a doStep that fails as an
-    FMU's does (fmpy's FMICallException), in the runner's stepping."""
+    """start_method: fork from a process that runs one thread, after a run too; the fork
+    server while another thread runs (a copy could inherit a lock that thread holds) and after
+    an FMU call failed in the process (a pythonfmu binary can leave the interpreter that ran an
+    exception inside it corrupt: a copy would inherit that). The failure is a doStep that fails
+    as an FMU's does (fmpy's FMICallException), in the runner's stepping."""
     scene = str(SCENARIOS / "servo_press.toml")
     script = (
         "import threading, crankfmu\n"
@@ -204,4 +242,5 @@ def test_workers_are_forked_unless_an_fmu_call_failed_or_a_thread_runs(tmp_path,
         "    print(type(err).__name__)\n"
         "print(first, with_thread, after_run, start_method())\n")
     done = run_pool_script(script, tmp_path, "")  # "": no start method chosen
-    assert done.stdout.split()[-4:] == ["fork", "spawn", "fork", "spawn"], done.stdout
+    assert done.stdout.split()[-4:] == ["fork", "forkserver", "fork", "forkserver"], \
+        done.stdout

@@ -34,6 +34,15 @@ from tests.support.full import FULL
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@pytest.fixture(scope="module", autouse=True)
+def fork_server():
+    """The process's fork server, started before this module's first pool with distributed
+    imported: the local pools fork their workers from it (pytest-xdist's worker runs other
+    threads: cosim/workers.py), and so do the Dask cluster's nannies (the cluster fixture)."""
+    from tests.support import fresh_python
+    fresh_python.start_server(("distributed",))
+
+
 @pytest.fixture(scope="module")
 def rotor_fmu_dir(fmu_dir):
     return fmu_dir  # the session's catalog (tests/conftest.py)
@@ -202,8 +211,9 @@ def test_killed_local_worker_loses_nothing(tmp_path, rotor_fmu_dir, serial_run):
     others = {p.pid for p in multiprocessing.active_children()}  # e.g. the one_worker pool's
 
     def a_worker():
-        kids = [p for p in multiprocessing.active_children()
-                if p.name.startswith("SpawnProcess") and p.pid not in others]
+        kids = [p for p in multiprocessing.active_children()  # the pool's start method's
+                if p.name.startswith(("ForkServerProcess", "SpawnProcess", "ForkProcess"))
+                and p.pid not in others]
         return kids[0].pid if kids else None
     info = _kill_when_rows(tmp_path / "pool" / "sweep.csv", a_worker, rows=1)
     table = sweep(scene, VARY, tmp_path / "pool", jobs=2, fmu_dir=rotor_fmu_dir,
@@ -232,9 +242,9 @@ def _session_processes(sid: int) -> list[tuple[int, str]]:
 
 
 @pytest.mark.skipif(not Path("/proc/self/stat").is_file(), reason="reads /proc (Linux)")
-@pytest.mark.parametrize("start_method", ["fork", "spawn"])
+@pytest.mark.parametrize("start_method", ["fork", "forkserver", "spawn"])
 def test_kill_9_of_a_sweep_leaves_no_process_and_no_temporary_folder(tmp_path, rotor_fmu_dir,
-                                                                     start_method):
+                                                                     start_method, short_tmp):
     """Issue #27. Before: after `kill -9` of `crankfmu sweep --jobs 2`, its 2 workers waited on
     their task queue for good, and with them multiprocessing's resource tracker (one set was
     still alive after 14 minutes). Now each worker ends when the pipe only its parent writes to
@@ -242,15 +252,19 @@ def test_kill_9_of_a_sweep_leaves_no_process_and_no_temporary_folder(tmp_path, r
     its own session; every process of that session must be gone within 30 s of the kill (the
     workers see the pipe close at once; the bound is for a loaded machine). Forked workers too:
     each closes its copy of the pipe's write end (without that, the pipe stayed open and they
-    waited for good)."""
+    waited for good). The fork server too: it ends with its parent, and its workers with the
+    pipe."""
     scene = spinner(tmp_path, stop=200.0)  # runs of seconds: the sweep is killed mid-run
     before, left, tmp = kill_9_mid_run(
         ["sweep", str(scene), *(f"--vary={v}" for v in VARY), "--jobs", "2", "--fmus",
          str(rotor_fmu_dir), "--out", str(tmp_path / "out"), "--no-progress"],
-        tmp_path, start_method, workers=2)
+        short_tmp, start_method, workers=2)
     print(f"\nkilled the sweep; its session held {len(before)} processes: {before}")
     assert left == [], left
     assert not [p.name for p in tmp.iterdir() if p.name.startswith("crankfmu-")]
+    # the server and the workers it forked (theirs is its command line)
+    served = [c for _, c in before if "multiprocessing.forkserver" in c]
+    assert bool(served) == (start_method == "forkserver"), before
 
 
 def _fmu_loaded(pid: int) -> bool:
@@ -261,16 +275,14 @@ def _fmu_loaded(pid: int) -> bool:
         return False
 
 
-def kill_9_mid_run(args: list[str], tmp_path: Path, start_method: str, workers: int):
-    """Start `crankfmu ARGS` in its own session (temporary folders in tmp_path/tmp, workers
-    started by `start_method`), wait until `workers` worker processes have loaded an FMU (they
-    are mid-run: before, a fixed 1 s), kill -9 the crankfmu process and wait up to 30 s (a
-    loaded machine's bound) for the session to empty. Returns (the session's processes before
-    the kill, those left, the temp folder)."""
+def kill_9_mid_run(args: list[str], tmp: Path, start_method: str, workers: int):
+    """Start `crankfmu ARGS` in its own session (temporary folders in `tmp`, an empty folder
+    with a short path: tests/conftest.short_tmp; workers started by `start_method`), wait
+    until `workers` worker processes have loaded an FMU (they are mid-run: before, a fixed
+    1 s), kill -9 the crankfmu process and wait up to 30 s (a loaded machine's bound) for the
+    session to empty. Returns (the session's processes before the kill, those left, `tmp`)."""
     import subprocess
     import sys
-    tmp = tmp_path / "tmp"
-    tmp.mkdir()
     process = subprocess.Popen(
         [sys.executable, "-m", "crankfmu", *args], start_new_session=True,
         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
@@ -406,11 +418,8 @@ def cluster():
     # read at start: a run survives one worker death; a worker holds only the run it executes.
     # Read at each worker's start, so for the module: the nannies start their workers from a
     # forkserver that imported distributed (and numpy, ...) once, not each a fresh interpreter
-    # that imports them again (the two first and the three the kill tests restart). The
-    # process's one fork server, shared with tests/support/fresh_python.py: started here with
-    # the imports of both (else the first to start it decides).
-    from tests.support import fresh_python
-    fresh_python.start_server(("distributed",))
+    # that imports them again (the two first and the three the kill tests restart): the
+    # process's one fork server, started by the fork_server fixture.
     with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}):
         with dask.config.set({"distributed.scheduler.allowed-failures": 1,
                               "distributed.scheduler.worker-saturation": 1.0}):

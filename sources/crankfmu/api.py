@@ -215,8 +215,8 @@ def simulate(scene, *, stop_time=None, step=None, algorithm=None, parameters=Non
     master, extrapolation and step are chosen from the estimate (crankfmu.cosim.target);
     raises crankfmu.cosim.target.TargetNotMet saying why when no setting meets it. `jobs=2`:
     the companion runs execute in a worker process beside the run (crankfmu.cosim.companions:
-    forked on Linux; where it is spawned, a script that calls this needs
-    `if __name__ == "__main__":`, crankfmu.cosim.workers).
+    forked from this process on Linux while it runs one thread; else it imports the calling
+    script again, which then needs `if __name__ == "__main__":`, crankfmu.cosim.workers).
     A run marked unreliable (Result.status) warns with UnreliableResultWarning."""
     from .cosim.results import check_run_set
     from .cosim.runner import RunOptions, run_scene

@@ -26,15 +26,17 @@ from pathlib import Path
 
 PRELOAD = ["numpy", "fmpy", "crankfmu.fmu.instance3", "tests.support.importer_support"]
 _context = multiprocessing.get_context("forkserver")
-_preload_set = False
 
 
-def _server(extra: tuple[str, ...] = ()):
-    global _preload_set
-    if not _preload_set:  # before the server starts (or it is already running: then as it is)
+def declare_preload(extra: tuple[str, ...] = ()) -> None:
+    """What this process's fork server imports when it starts, whoever starts it: PRELOAD and
+    `extra`. The server is the process's one (multiprocessing's): crankfmu's worker pools fork
+    their workers from it too where the process runs other threads (cosim/workers.py, which
+    leaves a preload chosen here as it is), and a Dask LocalCluster its workers (test_sweep.py).
+    A running server keeps what it imported."""
+    from multiprocessing import forkserver
+    if getattr(forkserver._forkserver, "_forkserver_pid", None) is None:
         _context.set_forkserver_preload([*PRELOAD, *extra])
-        _preload_set = True
-    return _context
 
 
 def start_server(extra: tuple[str, ...] = ()) -> None:
@@ -42,7 +44,7 @@ def start_server(extra: tuple[str, ...] = ()) -> None:
     imported: for a user of the same server that needs more (a Dask LocalCluster whose
     workers start from it: "distributed"), which then serves both."""
     import multiprocessing.forkserver
-    _server(extra)
+    declare_preload(extra)
     multiprocessing.forkserver.ensure_running()
 
 
@@ -84,7 +86,7 @@ class Started:
         self._out, self._err = (str(Path(self._folder.name) / n) for n in ("out", "err"))
         for path in (self._out, self._err):
             Path(path).touch()
-        self.process = _server().Process(target=_child, args=(
+        self.process = _context.Process(target=_child, args=(
             script, [str(a) for a in args], str(cwd or os.getcwd()),
             dict(os.environ if env is None else env), self._out, self._err))
         self.process.start()

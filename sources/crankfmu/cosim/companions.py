@@ -34,8 +34,9 @@ from ..errors import CrankfmuError
 if TYPE_CHECKING:
     from .workers import Lifeline
 
-# what a script must do for worker processes (multiprocessing's spawn imports the script again
-# in each worker, as the module __mp_main__: its body runs there up to the call that starts them)
+# what a script must do for worker processes (multiprocessing's spawn and forkserver import the
+# script again in each worker, as the module __mp_main__: its body runs there up to the call
+# that starts them)
 MAIN_GUARD = ("worker processes (jobs > 1) import the calling script again, so a script that "
               "starts them must make its calls under `if __name__ == \"__main__\":`; or use "
               "jobs=1, which runs everything in the calling process")
@@ -47,8 +48,8 @@ class WorkerStartError(CrankfmuError, RuntimeError):
 
 @contextlib.contextmanager
 def guarded_start():
-    """Around the calls that make a pool and start its worker processes: in a spawned worker
-    still importing the script (the script's body ran again there, without a main guard) it
+    """Around the calls that make a pool and start its worker processes: in a worker (spawned,
+    or from a fork server) still importing the script (the script's body ran again there, without a main guard) it
     raises WorkerStartError saying so, before the pool is made. Made there, the pool's
     semaphores outlived the worker, and the resource tracker's warning about them could come
     after the parent's error, as the last line a user reads. multiprocessing's own RuntimeError

@@ -7,13 +7,20 @@ companion worker (cosim/companions.py).
                                          parent's death) ends them
     close_pool(pool, lifeline)           shut it down, and remove the temporary folders of
                                          workers that were killed
-    start_method()                       "fork" or "spawn" (its docstring says when)
+    start_method()                       "fork", "forkserver" or "spawn" (its docstring says
+                                         when)
     worker_dir()                         this process's temporary folder, removed at its exit
 
 On Linux the workers are forked while the parent runs one thread and no FMU call has failed in
 it: a copy of the parent starts with crankfmu, fmpy and numpy imported, where a spawned
-interpreter spends about 0.3 s of CPU importing them (benchmarks/sweep.py), and a script without
-a main guard is not run again in it. A forked worker drops what is its parent's (_forget_parent).
+interpreter spends about 0.25-0.3 s of CPU importing them (benchmarks/sweep.py), and a script
+without a main guard is not run again in it. A forked worker drops what is its parent's
+(_forget_parent). Otherwise on Linux they come from multiprocessing's fork server: one fresh
+interpreter per parent process, started with the first such pool and kept for the next, that
+has imported the pool's module and nothing else and forks each worker from there (a few ms; it
+never ran an FMU nor another thread). Its workers take the parent's environment as they start
+(_adopt_environment), as forked and spawned ones have it. On macOS and Windows they are
+spawned (start_method says why).
 """
 from __future__ import annotations
 
@@ -42,22 +49,28 @@ def worker_dir(under: Path | None = None) -> Path:
     return _WORKER_DIR
 
 
+START_METHODS = ("fork", "forkserver", "spawn")
+
+
 def start_method() -> str:
-    """The workers' start method: "fork" on Linux while this process runs one thread and no
-    FMU call has failed in it, else "spawn": forking a process with other threads can copy a
-    lock another thread holds, a pythonfmu binary can leave the interpreter that ran an
-    exception inside it corrupt (fmu.instance.note_failed_call), and macOS and Windows offer no
-    safe fork. CRANKFMU_START_METHOD=spawn or fork chooses (the tests run both)."""
+    """The workers' start method on Linux: "fork" while this process runs one thread and no
+    FMU call has failed in it, else "forkserver"; "spawn" on macOS and Windows. Forking this
+    process when it runs other threads can copy a lock another thread holds, and a pythonfmu
+    binary can leave the interpreter that ran an exception inside it corrupt
+    (fmu.instance.note_failed_call); the fork server is a fresh interpreter that did neither.
+    macOS offers no safe fork of a process that has loaded its system libraries (numpy's
+    Accelerate), the fork server's included. CRANKFMU_START_METHOD (one of START_METHODS)
+    chooses (the tests run each)."""
     import multiprocessing
 
     from ..fmu.instance import failed_calls
     chosen = os.environ.get("CRANKFMU_START_METHOD", "")
-    if chosen in ("fork", "spawn"):
+    if chosen in START_METHODS:
         return chosen
-    if sys.platform.startswith("linux") and threading.active_count() == 1 \
-            and "fork" in multiprocessing.get_all_start_methods() and not failed_calls():
-        return "fork"
-    return "spawn"
+    if not sys.platform.startswith("linux") or \
+            "forkserver" not in multiprocessing.get_all_start_methods():
+        return "spawn"
+    return "fork" if threading.active_count() == 1 and not failed_calls() else "forkserver"
 
 
 class Lifeline:
@@ -80,13 +93,36 @@ def new_pool(jobs: int, preload: str = "crankfmu.cosim.runner"):
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
-    context = multiprocessing.get_context(start_method())
+    method = start_method()
+    if method == "forkserver" and not _fork_server_running(preload):
+        method = "spawn"
+    context = multiprocessing.get_context(method)
     lifeline = Lifeline(context)
-    forked = context.get_start_method() == "fork"
     pool = ProcessPoolExecutor(max_workers=jobs, mp_context=context, initializer=start_worker,
                                initargs=(lifeline.reader, preload,
-                                         lifeline.writer if forked else None))
+                                         lifeline.writer if method == "fork" else None,
+                                         dict(os.environ) if method == "forkserver" else None))
     return pool, lifeline
+
+
+def _fork_server_running(preload: str) -> bool:
+    """Start this process's fork server if it is not running; False if it cannot start (its
+    socket lies in the temporary folder, and a path longer than AF_UNIX allows, 108 bytes on
+    Linux, fails: the pool's workers are then spawned). Started here, it imports `preload` (its
+    workers are forked with it imported) instead of multiprocessing's default, the parent's main
+    script: run in the server, a script without a main guard would start its study there. A
+    server whose imports this process chose otherwise (the tests' own) keeps them: its workers
+    import `preload` in start_worker."""
+    from multiprocessing import forkserver
+    server = getattr(forkserver, "_forkserver", None)
+    if getattr(server, "_forkserver_pid", None) is None and \
+            getattr(server, "_preload_modules", None) == ["__main__"]:
+        forkserver.set_forkserver_preload([preload])
+    try:
+        forkserver.ensure_running()
+    except OSError:
+        return False
+    return True
 
 
 def close_pool(pool, lifeline: Lifeline, abandon: bool = False) -> None:
@@ -126,10 +162,11 @@ def ready() -> int:
     return os.getpid()
 
 
-def start_worker(lifeline, preload: str, parent_end=None) -> None:
+def start_worker(lifeline, preload: str, parent_end=None, environment=None) -> None:
     """A pool worker's initializer. It imports `preload`, as the pool starts (beside the
     parent's own preparation, not after it; a forked worker has it already, and drops what is
-    the parent's: _forget_parent, given `parent_end`, its copy of the lifeline's write end); it
+    the parent's: _forget_parent, given `parent_end`, its copy of the lifeline's write end; a
+    fork server's worker takes the parent's `environment`: _adopt_environment); it
     shows Python warnings on one line each, as the command line does (not with the source line
     of the warning, between a study's table rows); it skips the last garbage collections at
     exit (gc.freeze, as crankfmu.cli does: the parent waits for its workers to end); it removes
@@ -144,6 +181,8 @@ def start_worker(lifeline, preload: str, parent_end=None) -> None:
 
     if parent_end is not None:
         _forget_parent(parent_end)
+    if environment is not None:
+        _adopt_environment(environment)
     import importlib
     importlib.import_module(preload)
     from ..errors import warning_text
@@ -156,6 +195,16 @@ def start_worker(lifeline, preload: str, parent_end=None) -> None:
     signal.signal(signal.SIGTERM, lambda signum, frame: threading.Thread(
         target=_leave, args=(128 + signum,), daemon=True).start())  # the lock may be held here
     _end_with_parent(lifeline)
+
+
+def _adopt_environment(environment: dict) -> None:
+    """In a fork server's worker: the parent's environment variables as the pool started (the
+    server has those of its own start, and the parent may have set others since: its temporary
+    folder, crankfmu's cache folder), as a forked or spawned worker has them; the temporary
+    folder is read from them again at its first use."""
+    os.environ.clear()
+    os.environ.update(environment)
+    tempfile.tempdir = None
 
 
 def _forget_parent(parent_end) -> None:

@@ -10,9 +10,10 @@ process. Three implementations of one interface (make_executor chooses by --jobs
                                 the API needs no main guard.
     LocalPoolExecutor(jobs)     concurrent.futures.ProcessPoolExecutor of cosim/workers.py: on
                                 Linux its workers are forked from the parent (with its
-                                imports), elsewhere (or after an FMU call failed here)
-                                spawned, fresh interpreters: a script calling the API then
-                                needs `if __name__ == "__main__":` (cosim.companions.MAIN_GUARD;
+                                imports) while it runs one thread, else from a fork server;
+                                elsewhere spawned, fresh interpreters. Those not forked from
+                                the parent import the calling script again: it then needs
+                                `if __name__ == "__main__":` (cosim.companions.MAIN_GUARD;
                                 a missing one is a WorkerStartError, not a study of lost
                                 runs).
     DaskExecutor(address)       a Dask distributed cluster (distributed.Client). No shared disk is
