@@ -55,16 +55,19 @@ def test_the_target_search_chooses_the_same_run_with_workers(fmu_dir):
     assert sorted(r[2] for r in report_1.runs) == sorted(r[2] for r in report_2.runs)
 
 
-def _sleep(seconds: float) -> float:
+def _sleep(seconds: float, started: str) -> float:
+    Path(started).touch()
     time.sleep(seconds)
     return seconds
 
 
-def test_an_abandoned_worker_is_stopped_not_waited_for():
+def test_an_abandoned_worker_is_stopped_not_waited_for(tmp_path):
     t0 = time.perf_counter()
     pool = Companions(2)
-    pending = pool.submit(_sleep, 60.0)
-    time.sleep(0.5)
+    started = tmp_path / "started"
+    pending = pool.submit(_sleep, 60.0, str(started))
+    while not started.exists() and time.perf_counter() - t0 < 60:  # the worker sleeps
+        time.sleep(0.01)
     pool.close(abandon=True)
     pending.cancel()
     # a hang would wait out the 60 s sleep; the worker's start-up and termination take ~1 s
