@@ -716,7 +716,7 @@ def planetary_closed_form(d: dict, c0: float, c1: float, scene: str, w_a0: float
     brake energies (trapezoidal rule on the grid, n intervals per phase: relative error ~1e-6)."""
     from scipy.optimize import brentq
 
-    expm = _expm
+    from ..runtime.matrix_exponential import expm
     pieces, C, Mt, p, mode1, held, mover = planetary_phases(d, c0, c1, scene)
 
     def grid(A, z, span):
@@ -947,20 +947,3 @@ def write_planetary_csv(d: dict, path: Path) -> Path:
         w.writerow(["engagement time [s]", "Mp_b needed [N.m]"])
         w.writerows(zip(d["targets"], d["Mp_needed"]))
     return path
-
-
-def _expm(M: np.ndarray) -> np.ndarray:
-    """exp(M) of a small matrix by scaling and squaring with a degree-16 Taylor polynomial
-    (||M/2^k|| <= 1/2: truncation 2^-17/17! ~ 1e-20 relative). scipy.linalg.expm costs
-    ~20 ms a call for these 5x5 matrices on a loaded machine; this ~50 us, and the closed
-    forms call it thousands of times."""
-    norm = float(np.max(np.sum(np.abs(M), axis=1)))
-    k = max(0, int(math.ceil(math.log2(norm / 0.5)))) if norm > 0.5 else 0
-    X = M / 2.0 ** k
-    E = term = np.eye(M.shape[0])
-    for j in range(1, 17):
-        term = term @ X / j
-        E = E + term
-    for _ in range(k):
-        E = E @ E
-    return E
