@@ -243,11 +243,14 @@ def test_forked_workers_run_a_script_without_a_main_guard_once(tmp_path, fmu_dir
     assert "done: 2 sweep runs, 1 accuracy runs" in done.stdout
 
 
-def test_a_pool_from_a_script_without_a_main_guard_says_what_to_do(tmp_path, fmu_dir):
-    """With jobs=2 spawned workers (macOS, Windows; CRANKFMU_START_METHOD=spawn) import the
-    script again: crankfmu stops with a WorkerStartError that names the guard (before:
-    multiprocessing's RuntimeError in every worker, and lost runs)."""
-    done = _script(tmp_path, 2, fmu_dir, "spawn")
+@pytest.mark.parametrize("start_method", ["forkserver", "spawn"])
+def test_a_pool_from_a_script_without_a_main_guard_says_what_to_do(tmp_path, fmu_dir,
+                                                                   start_method):
+    """With jobs=2 workers from a fork server (Linux, where the script runs other threads) or
+    spawned (macOS, Windows) import the script again: crankfmu stops with a WorkerStartError
+    that names the guard (before: multiprocessing's RuntimeError in every worker, and lost
+    runs)."""
+    done = _script(tmp_path, 2, fmu_dir, start_method)
     assert done.returncode == 1 and "done:" not in done.stdout
     last = done.stderr.strip().splitlines()[-1]
     assert last.startswith("crankfmu.cosim.companions.WorkerStartError: ") and \
