@@ -119,7 +119,7 @@ def run_ecos_cli(exe, path, stop: float, cwd, *extra: str) -> dict[str, np.ndarr
     with columns 'time' and 'instance.variable' (Real variables only)."""
     import os
     import subprocess
-    env = {"PATH": "/usr/bin:/bin",
+    env = {"PATH": "/usr/bin:/bin", "TMPDIR": str(cwd),  # ecos unpacks an SSP there, for good
            **{k: v for k, v in os.environ.items() if k.startswith("OPENBLAS_")}}
     cmd = [str(exe), "simulate", "--path", str(path), "--stepSize", "0.001", "--stopTime",
            repr(stop), "--noParallel", *extra]
