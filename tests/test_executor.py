@@ -188,7 +188,10 @@ def test_a_fork_servers_workers_take_the_environment_the_parent_has_now(short_tm
     """The fork server keeps the environment of its start (the first pool's); a later pool's
     workers must have the parent's of their own start, as forked and spawned ones do: a
     changed temporary folder (where the workers put their folders, and the parent looks for
-    those of killed workers) and a variable set since (crankfmu's cache folder, say)."""
+    those of killed workers) and a variable set since (crankfmu's cache folder, say). And the
+    server, started by the pool, imported the pool's module, not the main script: crankfmu
+    chooses that through multiprocessing's private `_forkserver` (cosim.workers
+    ._fork_server_running), which a later Python may rename: then this fails."""
     later = short_tmp / "later"
     later.mkdir()
     script = (
@@ -204,10 +207,12 @@ def test_a_fork_servers_workers_take_the_environment_the_parent_has_now(short_tm
         "first = ask()\n"
         f"os.environ['TMPDIR'] = {str(later)!r}\n"
         "os.environ['CRANKFMU_PROBE'] = 'set since'\n"
-        "print(*first, *ask())\n")
+        "from multiprocessing import forkserver\n"
+        "print(*first, *ask(), *forkserver._forkserver._preload_modules)\n")
     done = run_pool_script(script, short_tmp, "forkserver")
     assert done.stdout.split() == ["ForkServerProcess", "None", str(short_tmp),
-                                   "ForkServerProcess", "set", "since", str(later)], done.stdout
+                                   "ForkServerProcess", "set", "since", str(later),
+                                   "crankfmu.cosim.runner"], done.stdout
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="forked workers: Linux")
