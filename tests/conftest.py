@@ -10,9 +10,13 @@ ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"
 
 
+@pytest.hookimpl(trylast=True)  # after pytest's own: its temporary folder exists
 def pytest_configure(config) -> None:
     """The FMUs the tests load unpack into a cache of this test run (crankfmu.fmu.archive), not
     the user's; the processes the tests start inherit it (xdist's workers: the controller's).
+    It lies in pytest's temporary folder of the session (as the catalog, pytest_sessionstart):
+    removed at the session's end, and by pytest's retention of the last three sessions' folders
+    if the session was killed (in /tmp itself they stayed for good).
     The process's fork server (tests/support/fresh_python.py, and crankfmu's worker pools in a
     process that runs other threads, as pytest-xdist's workers do) imports fresh_python's
     PRELOAD as it starts.
@@ -23,12 +27,12 @@ def pytest_configure(config) -> None:
     OpenBLAS's second thread made a 5 x 5 expm take 8 ms of CPU instead of 0.015 ms (waiting
     for a thread the scheduler had not run; test_masters.py: 8.4 s of CPU, 1.4 s on one)."""
     import os
-    import tempfile
 
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     if "CRANKFMU_CACHE_DIR" not in os.environ:
-        os.environ["CRANKFMU_CACHE_DIR"] = config._crankfmu_cache = tempfile.mkdtemp(
-            prefix="crankfmu-test-fmus-")
+        cache = config._tmp_path_factory.getbasetemp() / "crankfmu-fmus"
+        cache.mkdir()
+        os.environ["CRANKFMU_CACHE_DIR"] = config._crankfmu_cache = str(cache)
     from tests.support import fresh_python
     fresh_python.declare_preload()  # the fork server's imports, whoever starts it first
 
@@ -65,10 +69,9 @@ def pytest_sessionstart(session) -> None:
     config = session.config
     if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
         return
-    import tempfile
-
-    config._crankfmu_catalog = tempfile.mkdtemp(prefix="crankfmu-test-catalog-")  # gone at
-    _catalog(Path(config._crankfmu_catalog) / "fmus")  # unconfigure
+    catalog = config._tmp_path_factory.getbasetemp() / "crankfmu-catalog"  # as the cache
+    config._crankfmu_catalog = str(catalog)  # (pytest_configure); removed at unconfigure
+    _catalog(catalog / "fmus")
 
 
 def _catalog(dest: Path) -> Path:
