@@ -279,6 +279,29 @@ def test_a_worker_importing_the_script_makes_no_pool(monkeypatch, start):
         LocalPoolExecutor(2) if start == "executor" else Companions(2)
 
 
+@pytest.mark.parametrize("study", ["sweep", "accuracy", "compare"])
+def test_a_worker_importing_the_script_makes_no_temporary_folder(monkeypatch, study):
+    """The API's studies without `out` work in a temporary folder: in a worker still importing
+    the script they raise WorkerStartError before they make it. Before, sweep and accuracy made
+    it first; a worker that the parent stopped while it imported (before its exit handlers are
+    set) left it in /tmp: 7 empty crankfmu-sweep-* folders after a day of test runs."""
+    import multiprocessing
+    import tempfile
+
+    import crankfmu
+    from crankfmu.cosim.companions import WorkerStartError
+
+    def mkdtemp(*args, **kwargs):
+        raise AssertionError("a temporary folder was made")
+    monkeypatch.setattr(tempfile, "mkdtemp", mkdtemp)
+    monkeypatch.setattr(multiprocessing.current_process(), "_inheriting", True, raising=False)
+    call = {"sweep": lambda: crankfmu.sweep(SERVO, "motor.J_flywheel=0,0.1", jobs=2),
+            "accuracy": lambda: crankfmu.accuracy(SERVO, jobs=2),
+            "compare": lambda: crankfmu.compare(SERVO, SERVO)}[study]
+    with pytest.raises(WorkerStartError, match="__main__"):
+        call()
+
+
 def test_the_api_functions_stay_whatever_is_imported():
     """crankfmu.reference, accuracy, compare and sweep stay the API's functions when every
     subpackage and module is imported, and the package is a plain module: no subpackage shares

@@ -317,7 +317,7 @@ def accuracy(scene, *, out=None, stop_time=None, parameters=None, inputs=None, *
     folder = _path(out, "out", "the output folder")
     if folder is not None:
         return run_accuracy(scene, AccuracyOptions(out_dir=folder, out_option="out", **options))
-    with tempfile.TemporaryDirectory(prefix="crankfmu-accuracy-") as tmp:
+    with _temporary_folder("crankfmu-accuracy-") as tmp:
         result = run_accuracy(scene, AccuracyOptions(out_dir=Path(tmp), out_option="out",
                                                      **options))
     result.reference_csv = result.csv = result.sidecar = None
@@ -349,12 +349,21 @@ def compare(scene_a, scene_b, *, stop_time=None, out=None, fmu_dir=None, jobs=1,
         if folder is not None:
             return compare_scenes(scenes[0], scenes[1], folder, options, executor, "out",
                                   "stop_time", plot)
-        with tempfile.TemporaryDirectory(prefix="crankfmu-compare-") as tmp:
+        with _temporary_folder("crankfmu-compare-") as tmp:
             result = compare_scenes(scenes[0], scenes[1], Path(tmp), options, executor, "out",
                                     "stop_time", plot)
     result.csv = result.png = None
     return result
 
+
+
+def _temporary_folder(prefix: str) -> tempfile.TemporaryDirectory:
+    """Where a study without `out` writes, removed after it. Not made in a worker process that
+    is importing the calling script again (a script without a main guard: WorkerStartError,
+    cosim.companions): stopped there before its exit handlers are set, the worker left it."""
+    from .cosim.companions import refuse_in_importing_worker
+    refuse_in_importing_worker()
+    return tempfile.TemporaryDirectory(prefix=prefix)
 
 def sweep(scene, vary, out=None, **options):
     """Parameter sweep of a scene: a SweepTable (one row per run, the units of its columns,
@@ -377,7 +386,7 @@ def sweep(scene, vary, out=None, **options):
     folder = _path(out, "out", "the output folder")
     if folder is not None:
         return _sweep(scene, vary, folder, names=API_NAMES, **options)
-    with tempfile.TemporaryDirectory(prefix="crankfmu-sweep-") as tmp:
+    with _temporary_folder("crankfmu-sweep-") as tmp:
         table = _sweep(scene, vary, Path(tmp), names=API_NAMES, **options)
     table.csv = table.png = table.sidecar = None
     return table

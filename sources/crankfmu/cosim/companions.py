@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import sys
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -49,23 +50,35 @@ class WorkerStartError(CrankfmuError, RuntimeError):
 @contextlib.contextmanager
 def guarded_start():
     """Around the calls that make a pool and start its worker processes: in a worker (spawned,
-    or from a fork server) still importing the script (the script's body ran again there, without a main guard) it
-    raises WorkerStartError saying so, before the pool is made. Made there, the pool's
+    or from a fork server) still importing the script (the script's body ran again there,
+    without a main guard) it raises WorkerStartError saying so, before the pool is made. Made there, the pool's
     semaphores outlived the worker, and the resource tracker's warning about them could come
     after the parent's error, as the last line a user reads. multiprocessing's own RuntimeError
     for that case becomes the same WorkerStartError."""
-    import multiprocessing  # here: a run without workers does not import it
-    error = WorkerStartError(f"crankfmu was called while a worker process imported the "
-                             f"script: {MAIN_GUARD}")
-    # spawn's own test (multiprocessing.spawn._check_not_importing_main)
-    if getattr(multiprocessing.current_process(), "_inheriting", False):
-        raise error
+    refuse_in_importing_worker()
     try:
         yield
     except RuntimeError as err:
         if "bootstrapping phase" not in str(err):
             raise
-        raise error from None
+        raise _importing_worker_error() from None
+
+
+def refuse_in_importing_worker() -> None:
+    """WorkerStartError in a worker process that is still importing the calling script (its
+    body ran again there, without a main guard): the API's studies ask first, before they make
+    a temporary folder, which a worker stopped while it imports (before its exit handlers are
+    set) left behind in the system's temporary folder."""
+    multiprocessing = sys.modules.get("multiprocessing")  # not imported: not such a worker
+    # spawn's own test (multiprocessing.spawn._check_not_importing_main)
+    if multiprocessing is not None and \
+            getattr(multiprocessing.current_process(), "_inheriting", False):
+        raise _importing_worker_error()
+
+
+def _importing_worker_error() -> WorkerStartError:
+    return WorkerStartError(f"crankfmu was called while a worker process imported the script: "
+                            f"{MAIN_GUARD}")
 
 
 def processes(jobs: int) -> int:
