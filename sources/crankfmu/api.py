@@ -356,7 +356,6 @@ def compare(scene_a, scene_b, *, stop_time=None, out=None, fmu_dir=None, jobs=1,
     return result
 
 
-
 def _temporary_folder(prefix: str) -> tempfile.TemporaryDirectory:
     """Where a study without `out` writes, removed after it. Not made in a worker process that
     is importing the calling script again (a script without a main guard: WorkerStartError,
@@ -364,6 +363,7 @@ def _temporary_folder(prefix: str) -> tempfile.TemporaryDirectory:
     from .cosim.companions import refuse_in_importing_worker
     refuse_in_importing_worker()
     return tempfile.TemporaryDirectory(prefix=prefix)
+
 
 def sweep(scene, vary, out=None, **options):
     """Parameter sweep of a scene: a SweepTable (one row per run, the units of its columns,

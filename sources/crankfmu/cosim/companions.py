@@ -51,10 +51,10 @@ class WorkerStartError(CrankfmuError, RuntimeError):
 def guarded_start():
     """Around the calls that make a pool and start its worker processes: in a worker (spawned,
     or from a fork server) still importing the script (the script's body ran again there,
-    without a main guard) it raises WorkerStartError saying so, before the pool is made. Made there, the pool's
-    semaphores outlived the worker, and the resource tracker's warning about them could come
-    after the parent's error, as the last line a user reads. multiprocessing's own RuntimeError
-    for that case becomes the same WorkerStartError."""
+    without a main guard) it raises WorkerStartError saying so, before the pool is made. Made
+    there, the pool's semaphores outlived the worker, and the resource tracker's warning about
+    them could come after the parent's error, as the last line a user reads.
+    multiprocessing's own RuntimeError for that case becomes the same WorkerStartError."""
     refuse_in_importing_worker()
     try:
         yield
