@@ -16,7 +16,10 @@ def pytest_configure(config) -> None:
     the user's; the processes the tests start inherit it (xdist's workers: the controller's).
     It lies in pytest's temporary folder of the session (as the catalog, pytest_sessionstart):
     removed at the session's end, and by pytest's retention of the last three sessions' folders
-    if the session was killed (in /tmp itself they stayed for good).
+    if the session was killed (in /tmp itself they stayed for good). So does the temporary
+    folder (TMPDIR) of the session's processes: what the tools the tests drive unpack there and
+    keep (fmpy's extract, an fmpy.simulate_fmu that raises, ecos's SSP folders: 62 folders a
+    run in /tmp before) stays in pytest's folder, however a process ends.
     The process's fork server (tests/support/fresh_python.py, and crankfmu's worker pools in a
     process that runs other threads, as pytest-xdist's workers do) imports fresh_python's
     PRELOAD as it starts.
@@ -27,8 +30,14 @@ def pytest_configure(config) -> None:
     OpenBLAS's second thread made a 5 x 5 expm take 8 ms of CPU instead of 0.015 ms (waiting
     for a thread the scheduler had not run; test_masters.py: 8.4 s of CPU, 1.4 s on one)."""
     import os
+    import tempfile
 
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    if not hasattr(config, "workerinput"):  # the workers inherit it
+        session_tmp = config._tmp_path_factory.getbasetemp() / "tmp"
+        session_tmp.mkdir()
+        os.environ["TMPDIR"] = str(session_tmp)
+        tempfile.tempdir = None  # read again
     if "CRANKFMU_CACHE_DIR" not in os.environ:
         cache = config._tmp_path_factory.getbasetemp() / "crankfmu-fmus"
         cache.mkdir()

@@ -15,7 +15,6 @@ Tolerances, and why:
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 import zipfile
@@ -65,15 +64,12 @@ def test_effects_that_change_the_states_get_their_own_fmu(tmp_path):
     assert starts == {"effect_electrical_lag": "true", "effect_speed_loop": "true"}
 
 
-def test_model_exchange_refuses_effects_that_change_its_states(fmi3_dir, tmp_path):
+def test_model_exchange_refuses_effects_that_change_its_states(fmi3_dir):
     """The default DC motor FMU (no states) with the lag switched on: Model Exchange stops
-    with an error naming the FMU to build; fmpy reports the failed call. (Unpacked into
-    tmp_path: fmpy leaves the folder it unpacks into when the simulation raises.)"""
-    from fmpy import extract
-    unpacked = extract(str(fmi3_dir / "DcServoMotor.fmu"), unzipdir=str(tmp_path / "fmu"))
+    with an error naming the FMU to build; fmpy reports the failed call."""
     with pytest.raises(Exception, match="fmi3GetContinuousStates|fmi3GetNumberOf|failed"):
-        simulate_fmu(unpacked, fmi_type="ModelExchange", stop_time=0.01,
-                     start_values={"effect_electrical_lag": True})
+        simulate_fmu(str(fmi3_dir / "DcServoMotor.fmu"), fmi_type="ModelExchange",
+                     stop_time=0.01, start_values={"effect_electrical_lag": True})
 
 
 # -- fmpy: Co-Simulation FMI 2.0 and 3.0, Model Exchange FMI 3.0 --------------------------------
@@ -479,12 +475,11 @@ STATE_CASES = {  # model: (start values, step [s], steps before the save, steps 
 }
 
 
-def _state_runs(mode: str, cases: dict, tmp: Path, script: str = STATE_SCRIPT) -> dict:
+def _state_runs(mode: str, cases: dict, script: str = STATE_SCRIPT) -> dict:
     """`script` in a new process (tests/support/fresh_python.py: a fork of a server that has
     only imported numpy and fmpy; the saving and the restoring process share nothing)."""
     from tests.support import fresh_python
-    done = fresh_python.run(script, [mode, json.dumps(cases)], cwd=ROOT, timeout=600,
-                            env={**os.environ, "TMPDIR": str(tmp)})  # fmpy's extract folders
+    done = fresh_python.run(script, [mode, json.dumps(cases)], cwd=ROOT, timeout=600)
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     return json.loads(done.stdout.splitlines()[-1])
 
@@ -501,8 +496,8 @@ def test_fmu_state_serialized_and_restored_in_a_new_process_continues_bit_identi
         str(folder / f"{model}.fmu"), str(tmp_path / f"{model}-{version}.state"),
         *STATE_CASES[model]] for version, folder in ((2, fmu_dir), (3, fmi3_dir))
         for model in FMU_MODELS}
-    saved = _state_runs("save", cases, tmp_path)
-    restored = _state_runs("restore", cases, tmp_path)
+    saved = _state_runs("save", cases)
+    restored = _state_runs("restore", cases)
     for case in cases:
         assert restored[case] == saved[case], case
         assert saved[case][0] != saved[case][-1], case  # the outputs move after the save
@@ -604,8 +599,8 @@ def test_model_exchange_state_serialized_and_restored_in_a_new_process_continues
     differs (checked when this test was written)."""
     cases = {model: [str(fmi3_dir / f"{model}.fmu"), str(tmp_path / f"{model}-me.state"),
                      *ME_STATE_CASES[model]] for model in ME_STATE_CASES}
-    saved = _state_runs("save", cases, tmp_path, ME_STATE_SCRIPT)
-    restored = _state_runs("restore", cases, tmp_path, ME_STATE_SCRIPT)
+    saved = _state_runs("save", cases, ME_STATE_SCRIPT)
+    restored = _state_runs("restore", cases, ME_STATE_SCRIPT)
     for case in cases:
         assert restored[case] == saved[case], case
         assert saved[case][0] != saved[case][-1], case  # the outputs move after the save
@@ -644,15 +639,14 @@ print("freed", flush=True)
 '''
 
 
-def test_fmi3_impossible_parameters_give_fmi3error_then_reset_and_free(fmi3_dir, tmp_path):
+def test_fmi3_impossible_parameters_give_fmi3error_then_reset_and_free(fmi3_dir):
     """The FMI 3.0 launcher as the FMI 2.0 one (test_launcher.py): --set l=0.01 (rod shorter
     than the crank) ends fmi3ExitInitializationMode with fmi3Error (3), not pythonfmu3's
     fmi3Fatal, the reason logged; later calls are refused with fmi3Error; fmi3Reset gives a
     working instance; fmi3FreeInstance returns and the process exits with 0."""
     done = subprocess.run([sys.executable, "-c", FAILING_INIT3,
-                           str(fmi3_dir / "StephensonPress.fmu")], capture_output=True,
-                          text=True, timeout=120,
-                          env={**os.environ, "TMPDIR": str(tmp_path)})  # fmpy's extract
+                           str(fmi3_dir / "StephensonPress.fmu")],
+                          capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stdout + done.stderr
     out = done.stdout.splitlines()
     assert "exitInitializationMode status 3" in out

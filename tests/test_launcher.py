@@ -3,7 +3,6 @@ carries, and how it fails, seen from fmpy. Hosts without Python: tests/test_impo
 bare C host) and tests/test_importer_ecos.py (the native ecos command line)."""
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 import zipfile
@@ -72,14 +71,13 @@ print("freed", flush=True)
 '''
 
 
-def test_fmpy_gets_fmi2error_for_impossible_parameters_then_resets_and_frees(fmu_dir, tmp_path):
+def test_fmpy_gets_fmi2error_for_impossible_parameters_then_resets_and_frees(fmu_dir):
     """--set press.l=0.01 (rod shorter than the crank) in a fresh fmpy process: fmi2Error
     (3), the reason printed by fmpy's default logger without debug logging, then fmi2Reset gives
     a working instance, fmi2FreeInstance succeeds, and the process exits with 0."""
     done = subprocess.run([sys.executable, "-c", FAILING_INIT,
-                           str(fmu_dir / "StephensonPress.fmu")], capture_output=True,
-                          text=True, timeout=120,
-                          env={**os.environ, "TMPDIR": str(tmp_path)})  # fmpy's extract
+                           str(fmu_dir / "StephensonPress.fmu")],
+                          capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stdout + done.stderr
     out = done.stdout.splitlines()
     assert "exitInitializationMode status 3" in out  # fmi2Error, not fmi2Fatal (4)
@@ -89,15 +87,14 @@ def test_fmpy_gets_fmi2error_for_impossible_parameters_then_resets_and_frees(fmu
     assert any(line.startswith("after reset: phi") for line in out) and out[-1] == "freed"
 
 
-def test_fmpy_in_an_environment_without_scipy_names_scipy(fmu_dir, no_scipy_env, tmp_path):
+def test_fmpy_in_an_environment_without_scipy_names_scipy(fmu_dir, no_scipy_env):
     """fmpy run by an environment without scipy: the FMU uses that process's interpreter; the
     launcher's pre-flight fails fmi2Instantiate, and fmpy prints why without debug logging."""
     code = ("import sys, fmpy\n"
             "fmpy.simulate_fmu(sys.argv[1], stop_time=0.01)\n")
     done = subprocess.run([str(no_scipy_env / "bin" / "python"), "-c", code,
-                           str(fmu_dir / "DcServoMotor.fmu")], capture_output=True,
-                          text=True, timeout=120,  # fmpy leaves its unpacked folder on failure
-                          env={**os.environ, "TMPDIR": str(tmp_path)})
+                           str(fmu_dir / "DcServoMotor.fmu")],
+                          capture_output=True, text=True, timeout=120)
     assert done.returncode != 0 and "Failed to instantiate model" in done.stderr
     message = next(line for line in done.stdout.splitlines() if "fmi2Instantiate" in line)
     assert message.startswith("[ERROR]") and "No module named 'scipy'" in message, message

@@ -202,11 +202,9 @@ def test_libcosim_runs_the_archive_with_its_bindings(ssp, jacobi_reference):
     _agree(values, jacobi_reference)
 
 
-def test_ecos_runs_the_archive_with_its_bindings(scene, ssp, jacobi_reference, tmp_path,
-                                                 monkeypatch):
+def test_ecos_runs_the_archive_with_its_bindings(scene, ssp, jacobi_reference):
     from tests.support.importer_support import require_ecospy
     require_ecospy()
-    monkeypatch.setenv("TMPDIR", str(tmp_path))  # ecos unpacks the SSP there and leaves it
     from ecospy.EcosSimulation import EcosSimulation
 
     sim = EcosSimulation(step_size=scene.master.step, ssp_path=str(ssp))
