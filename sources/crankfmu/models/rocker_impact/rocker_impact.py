@@ -5,17 +5,25 @@ Equations, events, variables and tests: the model card README.md in this folder.
 """
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
 
 from ...runtime import dopri
 from ...runtime.model import Effect, IntegrationError, ParameterError, PhysicsModel, Variable
-from .rocker_linear import AnalysisError, RockerData, linearise
+from .rocker_linear import AnalysisError, Linearisation, RockerData, linearise
 from .support_flight import SupportFlight
 
 _MO100_S = 1.1 * 0.734 / (35.1 * 0.106)   # 10 % beyond the centre of percussion J/(m r)
 
+
+
+@functools.lru_cache(maxsize=64)
+def _linearised(data: RockerData, pinned: bool, rtol: float, c0: float | None) -> Linearisation:
+    """linearise, once per parameter set in a process: a run asks for the stiffnesses at each
+    initialization call (four for the hammer, 5 ms of CPU each), a study for every run."""
+    return linearise(data, pinned=pinned, rtol=rtol, c0=c0)
 
 class RockerImpact(PhysicsModel):
     model_name = "RockerImpact"
@@ -291,8 +299,8 @@ class RockerImpact(PhysicsModel):
         c0 = p.c_support if self._compliant else None
         if (c == 0.0 and not self._hertz) or c0 == 0.0:
             try:
-                lin = linearise(self.data(flange_J), pinned=not self._compliant,
-                                rtol=p.iteration_tol, c0=c0 or None)
+                lin = _linearised(self.data(flange_J), not self._compliant, p.iteration_tol,
+                                  c0 or None)
             except AnalysisError as err:
                 raise ParameterError(self.model_name, "c_support", p.c_support,
                                      f"> 0 N/m here: {err}") from err
