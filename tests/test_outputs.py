@@ -27,6 +27,7 @@ import pytest
 
 from crankfmu.cli import main
 from tests.conftest import ROOT, SCENARIOS
+from tests.support import fresh_python
 
 SERVO = SCENARIOS / "servo_press.toml"
 CONVENTIONAL = SCENARIOS / "conventional_press.toml"
@@ -236,12 +237,11 @@ def test_two_runs_into_one_folder_leave_one_consistent_set(tmp_path, fmu_dir):
     folder ends with the CSV, sidecar and plot of one of them, the sidecar naming that CSV's
     digest and that run's parameter."""
     out = tmp_path / "out"
-    procs = [subprocess.Popen([sys.executable, "-m", "crankfmu", "run", str(SERVO),
-                               "--stop-time", "0.3", "--fmus", str(fmu_dir), "--out", str(out),
-                               "--set", f"press.F_max={f}", "--no-progress", "--plot"],
-                              cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-             for f in (5e4, 6e4)]
+    procs = [fresh_python.start(fresh_python.CRANKFMU, [
+        "run", SERVO, "--stop-time", "0.3", "--fmus", fmu_dir, "--out", out,
+        "--set", f"press.F_max={f}", "--no-progress", "--plot"], cwd=ROOT) for f in (5e4, 6e4)]
     for proc in procs:
-        assert proc.wait(timeout=300) == 0, proc.stderr.read()
+        _, err = proc.communicate(timeout=300)
+        assert proc.returncode == 0, err
     side = _same_set(out / "servo_press.csv")
     assert side["components"]["press"]["parameters"]["F_max"] in (5e4, 6e4)

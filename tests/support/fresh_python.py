@@ -118,8 +118,11 @@ def run(script: str, args=(), cwd=None, env: dict | None = None,
                                        started.returncode, out, err)
 
 
+CRANKFMU = "import runpy\nrunpy.run_module('crankfmu', run_name='__main__', alter_sys=True)\n"
+
+
 def crankfmu(args, cwd=None, env: dict | None = None,
              timeout: float | None = None) -> subprocess.CompletedProcess:
-    """`python -m crankfmu *args` run to its end (see the module docstring)."""
-    return run("import runpy\nrunpy.run_module('crankfmu', run_name='__main__', alter_sys=True)\n",
-               args, cwd, env, timeout)
+    """`python -m crankfmu *args` run to its end (see the module docstring); start(CRANKFMU,
+    args) starts it."""
+    return run(CRANKFMU, args, cwd, env, timeout)
