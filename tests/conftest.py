@@ -34,6 +34,11 @@ def pytest_configure(config) -> None:
 
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     if not hasattr(config, "workerinput"):  # the workers inherit it
+        # this process's multiprocessing folder (its fork server's socket) in the temporary
+        # folder it had: a passing session's folder goes at its end (tmp_path_retention_policy
+        # = "failed"), before multiprocessing removes its own at the process's exit
+        import multiprocessing.util
+        multiprocessing.util.get_temp_dir()
         session_tmp = config._tmp_path_factory.getbasetemp() / "tmp"
         session_tmp.mkdir()
         os.environ["TMPDIR"] = str(session_tmp)
