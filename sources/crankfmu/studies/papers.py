@@ -181,16 +181,18 @@ class CrankMass:
         return -self.mass * self.g * self.radius * np.cos(phi)
 
 
-def press_steady_revolution(press, motor, u0: float, revolutions: int = 3,
+def press_steady_revolution(press, motor, u0: float, revolutions: int = 2,
                             n: int = 720, rtol: float = 1e-10,
                             crank_mass: CrankMass | None = None) -> PressRevolution:
     """Motor (DcServoMotor) and press (StephensonPress) rigidly coupled (the port convention:
     flange_w = i phi', flange_J into J) integrated as one ODE (DOP853), started at the analytic
     mean speed with the motor in equilibrium; the last of `revolutions` revolutions on n crank
-    angles. The slow mode J0/s ~ 0.02 s falls by e^-18 in a revolution (0.37 s): 2, 3, 4, 5 and
-    8 revolutions give the same last revolution to 1e-8 of its speed (the base-link sweep's
-    delta to 1.1e-8 between 3 and 6, which took 1.5 x the CPU). The integration restarts at the
-    forging window's edges (_across_forging_edges).
+    angles. The slow mode J0/s ~ 0.02 s falls by e^-18 in a revolution (0.37 s): 2 to 12
+    revolutions agree with an rtol 1e-12 solution to 7.8e-9 of its speed, 2 and 3 with each
+    other to 3.7e-11 of it (the servo press scene) and in the base-link sweep's delta to
+    1.1e-8 relative (`crankfmu analyze press` prints the same tables); 3 revolutions cost 1.3 x
+    the CPU of 2. The
+    integration restarts at the forging window's edges (_across_forging_edges).
     A `crank_mass` enters through the same port as the motor: its inertia / i^2 added to
     flange_J, its weight moment / i to flange_tau (the press reduces them back to the crank)."""
     from scipy.integrate import solve_ivp
