@@ -1,0 +1,89 @@
+"""The test suite's wall time and CPU, this checkout against another commit, alternated.
+
+    python benchmarks/suite_time.py [--against REV] [--repeat 3] [PYTEST ARGS ...]
+
+Runs `python -m pytest -q -p no:cacheprovider [PYTEST ARGS]` (the README's test command) in
+this checkout and, with --against, in a temporary git worktree of REV (removed at the end),
+taking turns: REV, this, REV, this, ... --repeat times each. A shared machine's speed drifts by
+5-10 % over an hour, so only runs made in turn compare. Prints each run's wall time and the
+CPU the whole machine was busy for meanwhile (user + nice + system + irq + softirq from
+/proc/stat, in core-seconds: every process the suite starts, fork servers' children included,
+which `/usr/bin/time` misses; run it on an otherwise idle machine), then the medians and their
+ratio. Linux only (/proc/stat). Each checkout's first run may build its FMUs into its fmus/:
+a run before the measured ones warms both (--no-warm-up skips it).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def busy_seconds() -> float:
+    """Core-seconds the machine has been busy since boot (the first line of /proc/stat)."""
+    fields = [int(v) for v in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:]]
+    user, nice, system, _idle, _iowait, irq, softirq = fields[:7]
+    return (user + nice + system + irq + softirq) / os.sysconf("SC_CLK_TCK")
+
+
+def run_suite(checkout: Path, pytest_args: list[str]) -> tuple[float, float, str]:
+    """(wall s, busy core-s, pytest's last line) of one run of the suite in `checkout`."""
+    env = {**os.environ, "PYTHONPATH": str(checkout / "sources")}
+    busy, start = busy_seconds(), time.perf_counter()
+    done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                           *pytest_args], cwd=checkout, env=env, capture_output=True, text=True)
+    wall, cpu = time.perf_counter() - start, busy_seconds() - busy
+    last = (done.stdout.strip().splitlines() or ["(no output)"])[-1]
+    return wall, cpu, last
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--against", help="a git revision to compare with (a worktree of it)")
+    parser.add_argument("--repeat", type=int, default=3, help="measured runs per checkout")
+    parser.add_argument("--no-warm-up", action="store_true", help="no unmeasured first run")
+    args, pytest_args = parser.parse_known_args()
+    with tempfile.TemporaryDirectory(prefix="suite_time_") as tmp:
+        checkouts = {"this": ROOT}
+        if args.against:
+            other = Path(tmp) / "other"
+            subprocess.run(["git", "worktree", "add", "--detach", "-q", str(other),
+                            args.against], cwd=ROOT, check=True)
+            checkouts = {args.against: other, "this": ROOT}
+        try:
+            return _measure(checkouts, args, pytest_args)
+        finally:
+            if args.against:
+                subprocess.run(["git", "worktree", "remove", "--force", str(other)], cwd=ROOT)
+
+
+def _measure(checkouts: dict[str, Path], args, pytest_args: list[str]) -> int:
+    if not args.no_warm_up:
+        for name, checkout in checkouts.items():
+            print(f"warm-up {name}: {run_suite(checkout, pytest_args)[2]}", flush=True)
+    runs: dict[str, list[tuple[float, float]]] = {name: [] for name in checkouts}
+    for _ in range(args.repeat):
+        for name, checkout in checkouts.items():
+            wall, cpu, last = run_suite(checkout, pytest_args)
+            runs[name].append((wall, cpu))
+            print(f"{name:>12}: {wall:6.1f} s wall, {cpu:6.1f} core-s busy   "
+                  f"[{last}] {time.strftime('%H:%M:%S')}", flush=True)
+    medians = {name: (statistics.median(w for w, _ in r), statistics.median(c for _, c in r))
+               for name, r in runs.items()}
+    for name, (wall, cpu) in medians.items():
+        print(f"median {name:>12}: {wall:6.1f} s wall, {cpu:6.1f} core-s busy")
+    if len(medians) == 2:
+        (_, (w0, c0)), (_, (w1, c1)) = medians.items()
+        print(f"ratio this / {args.against}: wall {w1 / w0:.3f}, busy {c1 / c0:.3f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
