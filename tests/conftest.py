@@ -85,35 +85,73 @@ def pytest_sessionstart(session) -> None:
         return
     catalog = config._tmp_path_factory.getbasetemp() / "crankfmu-catalog"  # as the cache
     config._crankfmu_catalog = str(catalog)  # (pytest_configure); removed at unconfigure
-    _catalog(catalog / "fmus")
+    # the controller runs one thread until xdist starts its workers, after this hook: the
+    # builds a fresh checkout needs (18 FMUs, 2.7 s of CPU) may fork a process per core
+    _catalog(catalog / "fmus", jobs=config.getoption("numprocesses"))
 
 
-def _catalog(dest: Path) -> Path:
+def _catalog(dest: Path, jobs: int = 1) -> Path:
     """Every catalog model's FMI 2.0 FMU in dest and FMI 3.0 FMU (default effects) in
     dest/fmi3/: copies of the repository's fmus/ and fmus/fmi3/ once those are current, each
-    built there first if missing or stale, as a scene's run does (system/wiring.resolve_fmu).
-    Scenes run without --fmus use those files; with the copies, no test can change what
-    another reads. The builds are the same bytes wherever they are written (fmpy validate
-    checks them in tests/test_fmu_build.py)."""
+    built there first if missing or stale, as a scene's run does (system/wiring.resolve_fmu),
+    by `jobs` forked processes when more than one is stale (only from a process that runs no
+    other thread). Scenes run without --fmus use those files; with the copies, no test can
+    change what another reads. The builds are the same bytes wherever they are written (fmpy
+    validate checks them in tests/test_fmu_build.py)."""
     import shutil
 
     from crankfmu.fmu import build_fmi3
-    from crankfmu.fmu.build import build_fmu, rebuild_reason
     from crankfmu.models.catalog import FMU_MODELS
 
     repository = ROOT / "fmus"
+    stale = [(model, version) for model in FMU_MODELS for version in (2, 3)
+             if _repository_fmu(model, version, check=True) is None]
+    if jobs > 1 and len(stale) > 1:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+        with ProcessPoolExecutor(min(jobs, len(stale)),
+                                 mp_context=multiprocessing.get_context("fork")) as pool:
+            list(pool.map(_build_repository_fmu, stale))
+    else:
+        for model, version in stale:
+            _build_repository_fmu((model, version))
+    (dest / build_fmi3.FMI3_DIR).mkdir(parents=True, exist_ok=True)
     for model in FMU_MODELS:
-        effects = build_fmi3.variant(model, None)
-        fmi3 = build_fmi3.fmu_path(model, repository, effects)
-        if rebuild_reason(repository / f"{model}.fmu", model) is not None:
-            build_fmu(model, repository)
-        if rebuild_reason(fmi3, model, 3,
-                          build_fmi3.current_build_id(model, effects)) is not None:
-            build_fmi3.build_fmu3(model, fmi3.parent, effects)
-        (dest / build_fmi3.FMI3_DIR).mkdir(parents=True, exist_ok=True)
         shutil.copyfile(repository / f"{model}.fmu", dest / f"{model}.fmu")
+        fmi3 = _repository_fmu(model, 3)
         shutil.copyfile(fmi3, dest / build_fmi3.FMI3_DIR / fmi3.name)
     return dest
+
+
+def _repository_fmu(model: str, version: int, check: bool = False) -> Path | None:
+    """The repository's FMU file of `model` (FMI `version`; default effects); with `check`,
+    None when it is missing or stale (build.rebuild_reason)."""
+    from crankfmu.fmu import build_fmi3
+    from crankfmu.fmu.build import rebuild_reason
+
+    repository = ROOT / "fmus"
+    if version == 2:
+        path = repository / f"{model}.fmu"
+        return None if check and rebuild_reason(path, model) is not None else path
+    effects = build_fmi3.variant(model, None)
+    path = build_fmi3.fmu_path(model, repository, effects)
+    stale = check and rebuild_reason(path, model, 3, build_fmi3.current_build_id(
+        model, effects)) is not None
+    return None if stale else path
+
+
+def _build_repository_fmu(item: tuple[str, int]) -> None:
+    """Build the repository's FMU (model, FMI version) into fmus/ (or fmus/fmi3/)."""
+    from crankfmu.fmu import build_fmi3
+    from crankfmu.fmu.build import build_fmu
+
+    model, version = item
+    if version == 2:
+        build_fmu(model, ROOT / "fmus")
+    else:
+        effects = build_fmi3.variant(model, None)
+        build_fmi3.build_fmu3(model, build_fmi3.fmu_path(model, ROOT / "fmus", effects).parent,
+                              effects)
 
 
 @pytest.hookimpl(optionalhook=True)
