@@ -191,8 +191,8 @@ def press_steady_revolution(press, motor, u0: float, revolutions: int = 2,
     revolutions agree with an rtol 1e-12 solution to 7.8e-9 of its speed, 2 and 3 with each
     other to 3.7e-11 of it (the servo press scene) and in the base-link sweep's delta to
     1.1e-8 relative (`crankfmu analyze press` prints the same tables); 3 revolutions cost 1.3 x
-    the CPU of 2. The
-    integration restarts at the forging window's edges (_across_forging_edges).
+    the CPU of 2. The integration restarts at the forging window's edges
+    (_across_forging_edges).
     A `crank_mass` enters through the same port as the motor: its inertia / i^2 added to
     flange_J, its weight moment / i to flange_tau (the press reduces them back to the crank)."""
     from scipy.integrate import solve_ivp

@@ -18,12 +18,12 @@ from .support_flight import SupportFlight
 _MO100_S = 1.1 * 0.734 / (35.1 * 0.106)   # 10 % beyond the centre of percussion J/(m r)
 
 
-
 @functools.lru_cache(maxsize=64)
 def _linearised(data: RockerData, pinned: bool, rtol: float, c0: float | None) -> Linearisation:
     """linearise, once per parameter set in a process: a run asks for the stiffnesses at each
     initialization call (four for the hammer, 5 ms of CPU each), a study for every run."""
     return linearise(data, pinned=pinned, rtol=rtol, c0=c0)
+
 
 class RockerImpact(PhysicsModel):
     model_name = "RockerImpact"
