@@ -191,7 +191,8 @@ class _Solution:
     between read from DOP853's dense output of the integration they fall in; a chunk ends at
     every switch of the command table. Chunks are integrated whole whatever was asked, so
     samples 0..n are the same numbers however far it went on. (Restarting at every sample, the
-    clutch hammer's 1.6 s took 1600 solve_ivp calls and 2.6 x the CPU.)"""
+    clutch hammer's 1.6 s took 1600 solve_ivp calls, 0.99 s of CPU against 0.24 s now; the
+    clutch mill stand's 1.9 s 1.10 s against 0.24 s.)"""
 
     def __init__(self, path, mech_name: str, dt: float, rtol: float):
         self.model, table = from_scene(path, mech_name)
