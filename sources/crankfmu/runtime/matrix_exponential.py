@@ -5,7 +5,8 @@ their 1-norm bounds theta_m and coefficients b_k are that paper's).
 
 It is here, not imported from scipy.linalg, because `import scipy.linalg` costs 0.24-0.29 s of
 CPU in every process that loads an FMU whose model needs an exponential (Rotor and ShaftRotor at
-their first step, the rocker's linear theory), on matrices of 2 to 8 rows. Against
+their first step), on matrices of 2 to 8 rows; the rocker's linear theory
+(rocker_linear.LinearFlow), which no FMU step calls, still uses scipy's. Against
 scipy.linalg.expm it agrees to a few units of round-off (tests/test_matrix_exponential.py).
 
 Degree m is the lowest whose bound theta_m exceeds ||A||_1: the approximant r_m(A) then equals
