@@ -103,9 +103,8 @@ def _catalog(dest: Path, jobs: int = 1) -> Path:
     from crankfmu.fmu import build_fmi3
     from crankfmu.models.catalog import FMU_MODELS
 
-    repository = ROOT / "fmus"
     stale = [(model, version) for model in FMU_MODELS for version in (2, 3)
-             if _repository_fmu(model, version, check=True) is None]
+             if _stale(model, version)]
     if jobs > 1 and len(stale) > 1:
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
@@ -117,27 +116,31 @@ def _catalog(dest: Path, jobs: int = 1) -> Path:
             _build_repository_fmu((model, version))
     (dest / build_fmi3.FMI3_DIR).mkdir(parents=True, exist_ok=True)
     for model in FMU_MODELS:
-        shutil.copyfile(repository / f"{model}.fmu", dest / f"{model}.fmu")
+        shutil.copyfile(_repository_fmu(model, 2), dest / f"{model}.fmu")
         fmi3 = _repository_fmu(model, 3)
         shutil.copyfile(fmi3, dest / build_fmi3.FMI3_DIR / fmi3.name)
     return dest
 
 
-def _repository_fmu(model: str, version: int, check: bool = False) -> Path | None:
-    """The repository's FMU file of `model` (FMI `version`; default effects); with `check`,
-    None when it is missing or stale (build.rebuild_reason)."""
+def _repository_fmu(model: str, version: int) -> Path:
+    """The repository's FMU file of `model`, FMI `version` (FMI 3.0: default effects)."""
+    from crankfmu.fmu import build_fmi3
+
+    if version == 2:
+        return ROOT / "fmus" / f"{model}.fmu"
+    return build_fmi3.fmu_path(model, ROOT / "fmus", build_fmi3.variant(model, None))
+
+
+def _stale(model: str, version: int) -> bool:
+    """Is the repository's FMU missing or stale (build.rebuild_reason, as resolve_fmu asks)?"""
     from crankfmu.fmu import build_fmi3
     from crankfmu.fmu.build import rebuild_reason
 
-    repository = ROOT / "fmus"
+    path = _repository_fmu(model, version)
     if version == 2:
-        path = repository / f"{model}.fmu"
-        return None if check and rebuild_reason(path, model) is not None else path
-    effects = build_fmi3.variant(model, None)
-    path = build_fmi3.fmu_path(model, repository, effects)
-    stale = check and rebuild_reason(path, model, 3, build_fmi3.current_build_id(
-        model, effects)) is not None
-    return None if stale else path
+        return rebuild_reason(path, model) is not None
+    build_id = build_fmi3.current_build_id(model, build_fmi3.variant(model, None))
+    return rebuild_reason(path, model, 3, build_id) is not None
 
 
 def _build_repository_fmu(item: tuple[str, int]) -> None:
@@ -149,9 +152,8 @@ def _build_repository_fmu(item: tuple[str, int]) -> None:
     if version == 2:
         build_fmu(model, ROOT / "fmus")
     else:
-        effects = build_fmi3.variant(model, None)
-        build_fmi3.build_fmu3(model, build_fmi3.fmu_path(model, ROOT / "fmus", effects).parent,
-                              effects)
+        build_fmi3.build_fmu3(model, _repository_fmu(model, 3).parent,
+                              build_fmi3.variant(model, None))
 
 
 @pytest.hookimpl(optionalhook=True)

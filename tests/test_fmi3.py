@@ -402,17 +402,19 @@ def test_an_fmi3_fmu_with_another_builds_token_is_refused_for_both_interfaces(fm
 
 
 # -- an FMU state across processes ----------------------------------------------------------------
-STATE_SCRIPT = r'''
-import json, sys
-from fmpy import extract, read_model_description
-
-
+# both state scripts: the saving process unpacks the FMU, the restoring one loads that folder
+UNPACKED = r'''
 def unpacked(path, state_file, mode):
     """The FMU's folder: unpacked by the saving process, which the restoring one loads again
     (as a host loads an unpacked FMU twice; each extraction cost 40-80 ms)."""
     folder = state_file + ".unpacked"
     return extract(path, unzipdir=folder) if mode == "save" else folder
+'''
 
+STATE_SCRIPT = r'''
+import json, sys
+from fmpy import extract, read_model_description
+''' + UNPACKED + r'''
 
 def instance(path, start, folder):
     md = read_model_description(path)
@@ -515,7 +517,7 @@ ME_STATE_SCRIPT = r'''
 import json, sys
 from fmpy import extract, read_model_description
 from fmpy.fmi3 import FMU3Model, fmi3Float64
-
+''' + UNPACKED + r'''
 
 def instance(path, start, folder):
     """An initialized Model Exchange instance in continuous-time mode, and what it has."""
@@ -571,9 +573,7 @@ def euler(fmu, nx, nz, t, x, h, steps, outputs, rows):
 mode, cases = sys.argv[1], json.loads(sys.argv[2])
 results = {}
 for case, (path, state_file, start, h, before, after) in cases.items():
-    folder = state_file + ".unpacked"  # unpacked by the saving process, as in STATE_SCRIPT
-    fmu, nx, nz, outputs = instance(path, start, extract(path, unzipdir=folder)
-                                    if mode == "save" else folder)
+    fmu, nx, nz, outputs = instance(path, start, unpacked(path, state_file, mode))
     if mode == "save":
         x0 = (fmi3Float64 * nx)()
         fmu.getContinuousStates(x0, nx)
