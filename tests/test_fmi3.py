@@ -64,15 +64,33 @@ def test_effects_that_change_the_states_get_their_own_fmu(tmp_path):
     assert starts == {"effect_electrical_lag": "true", "effect_speed_loop": "true"}
 
 
-def test_model_exchange_refuses_effects_that_change_its_states(fmi3_dir):
+def test_model_exchange_refuses_effects_that_change_its_states(fmi3_dir, fmpy_folder):
     """The default DC motor FMU (no states) with the lag switched on: Model Exchange stops
     with an error naming the FMU to build; fmpy reports the failed call."""
     with pytest.raises(Exception, match="fmi3GetContinuousStates|fmi3GetNumberOf|failed"):
-        simulate_fmu(str(fmi3_dir / "DcServoMotor.fmu"), fmi_type="ModelExchange",
+        simulate_fmu(fmpy_folder(fmi3_dir / "DcServoMotor.fmu"), fmi_type="ModelExchange",
                      stop_time=0.01, start_values={"effect_electrical_lag": True})
 
 
 # -- fmpy: Co-Simulation FMI 2.0 and 3.0, Model Exchange FMI 3.0 --------------------------------
+@pytest.fixture(scope="module")
+def fmpy_folder(tmp_path_factory):
+    """The folder fmpy's extract makes of an FMU, once per FMU and module: simulate_fmu's
+    argument (it takes one as it takes the file; given the file it unzips it at every call and
+    removes the folder after, 45 ms of CPU a call, 1.5 s over these tests) and what the FMU
+    state scripts' processes load. fmpy running the files themselves:
+    tests/test_importer_fmpy.py."""
+    from fmpy import extract
+
+    root, folders = tmp_path_factory.mktemp("fmpy"), {}
+
+    def folder(fmu: Path) -> str:
+        if fmu not in folders:
+            folders[fmu] = str(extract(str(fmu), str(root / f"{len(folders)}_{fmu.stem}")))
+        return folders[fmu]
+    return folder
+
+
 START = {  # inputs and effects that make every model move (its states change, events happen)
     "DcServoMotor": {"effect_electrical_lag": True},
     "StephensonPress": {"flange_tau": 100.0, "flange_J": 0.05},
@@ -85,18 +103,19 @@ START = {  # inputs and effects that make every model move (its states change, e
 
 
 @pytest.mark.parametrize("model", list(FMU_MODELS))
-def test_fmi3_co_simulation_equals_fmi2_bit_for_bit(fmu_dir, fmi3_dir, model):
+def test_fmi3_co_simulation_equals_fmi2_bit_for_bit(fmu_dir, fmi3_dir, fmpy_folder, model):
     """fmpy's simulate_fmu of each model as FMI 2.0 and as FMI 3.0 Co-Simulation: the same
     outputs, bit for bit (the shared runtime core, the tolerance passed by the launcher)."""
     kw = dict(stop_time=0.2, output_interval=1e-3, relative_tolerance=1e-9,
               start_values=START.get(model, {}))
-    two = simulate_fmu(str(fmu_dir / f"{model}.fmu"), **kw)
-    three = simulate_fmu(str(fmi3_dir / f"{model}.fmu"), **kw)
+    two = simulate_fmu(fmpy_folder(fmu_dir / f"{model}.fmu"), **kw)
+    three = simulate_fmu(fmpy_folder(fmi3_dir / f"{model}.fmu"), **kw)
     for name in two.dtype.names:
         np.testing.assert_array_equal(three[name], two[name], err_msg=f"{model}.{name}")
 
 
-def _me_against_cs(fmu_dir, fmi3_dir, model, rtol, stop_time=0.2) -> tuple[float, str]:
+def _me_against_cs(fmpy_folder, fmu_dir, fmi3_dir, model, rtol,
+                   stop_time=0.2) -> tuple[float, str]:
     """(worst deviation relative to the output's largest magnitude, output) of fmpy's Model
     Exchange run (CVode) from the FMI 2.0 Co-Simulation run, both at `rtol`, over `stop_time`
     (s) at 1 ms samples after t = 0. The row at t = 0 differs by convention where an input acts
@@ -107,8 +126,8 @@ def _me_against_cs(fmu_dir, fmi3_dir, model, rtol, stop_time=0.2) -> tuple[float
     step's change but not against their own magnitude where the motion is smooth."""
     kw = dict(stop_time=stop_time, output_interval=1e-3, relative_tolerance=rtol,
               start_values=START.get(model, {}))
-    cs = simulate_fmu(str(fmu_dir / f"{model}.fmu"), **kw)
-    me = simulate_fmu(str(fmi3_dir / f"{model}.fmu"), fmi_type="ModelExchange",
+    cs = simulate_fmu(fmpy_folder(fmu_dir / f"{model}.fmu"), **kw)
+    me = simulate_fmu(fmpy_folder(fmi3_dir / f"{model}.fmu"), fmi_type="ModelExchange",
                       record_events=False, **kw)
     assert len(me) == len(cs)
     outputs = {v.name for v in physics_class(model).outputs}
@@ -119,15 +138,15 @@ def _me_against_cs(fmu_dir, fmi3_dir, model, rtol, stop_time=0.2) -> tuple[float
 
 @pytest.mark.parametrize("model", ["StephensonPress", "InductionMotor", "PlanetaryClutchDrive",
                                    "MillStandDrive", "Rotor", "ShaftRotor"])
-def test_fmi3_model_exchange_follows_co_simulation(fmu_dir, fmi3_dir, model):
+def test_fmi3_model_exchange_follows_co_simulation(fmu_dir, fmi3_dir, fmpy_folder, model):
     """Every output within 1e-5 of its largest magnitude (measured at most 2.4e-6, the
     clutch's brake energy). The DC motor's default FMU has no states (its lag is off); the
     rocker: the next tests."""
-    worst, name = _me_against_cs(fmu_dir, fmi3_dir, model, 1e-10)
+    worst, name = _me_against_cs(fmpy_folder, fmu_dir, fmi3_dir, model, 1e-10)
     assert worst < 1e-5, f"{model}.{name}: Model Exchange deviates by {worst:.3g}"
 
 
-def test_hammer_model_exchange_converges_to_co_simulation(fmu_dir, fmi3_dir):
+def test_hammer_model_exchange_converges_to_co_simulation(fmu_dir, fmi3_dir, fmpy_folder):
     """The crank-rocker hammer's undamped support ringing after each blow (kHz) accumulates
     phase error in both integrators: the two runs are the same solution if the gap closes with
     the tolerance: at least 3 x smaller at 1e-11. The blow comes between 0.139 and 0.140 s; the
@@ -135,8 +154,8 @@ def test_hammer_model_exchange_converges_to_co_simulation(fmu_dir, fmi3_dir):
     Quick: to 0.15 s, 10 ms of ringing (measured 2.8e-5 at rtol 1e-10, 6.4 x smaller at
     1e-11); full: to 0.2 s (1.5e-4, 7.7 x)."""
     stop = quick_or_full(0.15, 0.2)
-    coarse, _ = _me_against_cs(fmu_dir, fmi3_dir, "CrankRockerHammer", 1e-10, stop)
-    fine, name = _me_against_cs(fmu_dir, fmi3_dir, "CrankRockerHammer", 1e-11, stop)
+    coarse, _ = _me_against_cs(fmpy_folder, fmu_dir, fmi3_dir, "CrankRockerHammer", 1e-10, stop)
+    fine, name = _me_against_cs(fmpy_folder, fmu_dir, fmi3_dir, "CrankRockerHammer", 1e-11, stop)
     assert fine < coarse / 3.0 and fine < 1e-4, (coarse, fine, name)
 
 
@@ -144,14 +163,16 @@ MO100 = {"J": 0.734, "m": 35.1, "r": 0.106, "S": 0.21700800946083965, "R_c": 0.0
          "E": 2.04e11, "rho": 7850.0, "nu": 0.3, "V0": 10.0, "k_n": 80e6}
 
 
-def test_mo100_impact_as_model_exchange_in_fmpy_matches_the_fmi2_run(fmu_dir, fmi3_dir):
+def test_mo100_impact_as_model_exchange_in_fmpy_matches_the_fmi2_run(fmu_dir, fmi3_dir,
+                                                                     fmpy_folder):
     """The MO-100 impact (scenarios/mo100_impact.toml's parameters) in fmpy.simulate_fmu: the
     FMI 3.0 RockerImpact as Model Exchange with CVode, against the FMI 2.0 Co-Simulation run
     at 2 us: peak force, pulse duration and support reaction to 1e-6 relative."""
     figures = ("P_peak", "impact_duration", "T_peak")
-    cs = simulate_fmu(str(fmu_dir / "RockerImpact.fmu"), stop_time=1e-3, output_interval=2e-6,
-                      relative_tolerance=1e-10, start_values=MO100, output=figures)
-    me = simulate_fmu(str(fmi3_dir / "RockerImpact.fmu"), fmi_type="ModelExchange",
+    cs = simulate_fmu(fmpy_folder(fmu_dir / "RockerImpact.fmu"), stop_time=1e-3,
+                      output_interval=2e-6, relative_tolerance=1e-10, start_values=MO100,
+                      output=figures)
+    me = simulate_fmu(fmpy_folder(fmi3_dir / "RockerImpact.fmu"), fmi_type="ModelExchange",
                       stop_time=1e-3, output_interval=2e-6, relative_tolerance=1e-10,
                       start_values=MO100, output=figures)
     assert cs["impact_duration"][-1] == pytest.approx(3.65e-4, rel=0.01)  # the paper's pulse
@@ -402,19 +423,12 @@ def test_an_fmi3_fmu_with_another_builds_token_is_refused_for_both_interfaces(fm
 
 
 # -- an FMU state across processes ----------------------------------------------------------------
-# both state scripts: the saving process unpacks the FMU, the restoring one loads that folder
-UNPACKED = r'''
-def unpacked(path, state_file, mode):
-    """The FMU's folder: unpacked by the saving process, which the restoring one loads again
-    (as a host loads an unpacked FMU twice; each extraction cost 40-80 ms)."""
-    folder = state_file + ".unpacked"
-    return extract(path, unzipdir=folder) if mode == "save" else folder
-'''
-
+# both state scripts load the folders fmpy_folder unpacked (the bit-for-bit tests above have
+# unpacked most): both processes load the same folder, as a host loads an unpacked FMU twice
 STATE_SCRIPT = r'''
 import json, sys
-from fmpy import extract, read_model_description
-''' + UNPACKED + r'''
+from fmpy import read_model_description
+
 
 def instance(path, start, folder):
     md = read_model_description(path)
@@ -448,9 +462,8 @@ def instance(path, start, folder):
 
 mode, cases = sys.argv[1], json.loads(sys.argv[2])
 results = {}
-for case, (path, state_file, start, step, before, after) in cases.items():
-    fmu, outputs, (get, _, serialize, deserialize) = instance(
-        path, start, unpacked(path, state_file, mode))
+for case, (path, folder, state_file, start, step, before, after) in cases.items():
+    fmu, outputs, (get, _, serialize, deserialize) = instance(path, start, folder)
     if mode == "save":
         for k in range(before):
             fmu.doStep(k * step, step)
@@ -495,7 +508,7 @@ def _state_runs(mode: str, cases: dict, script: str = STATE_SCRIPT) -> dict:
 
 
 def test_fmu_state_serialized_and_restored_in_a_new_process_continues_bit_identically(
-        fmu_dir, fmi3_dir, tmp_path):
+        fmu_dir, fmi3_dir, fmpy_folder, tmp_path):
     """Every model, Co-Simulation, FMI 2.0 and FMI 3.0: a process steps the FMU, saves and
     serializes its state (mid-impact for the rocker, mid-slip for the clutch, in the support's
     ringing after the first blow for the hammer) and steps on; a new process instantiates it,
@@ -503,9 +516,9 @@ def test_fmu_state_serialized_and_restored_in_a_new_process_continues_bit_identi
     modes and the integrator's step size are in the state). One process saves every case, one
     restores them."""
     cases = {f"{model} (FMI {version}.0)": [
-        str(folder / f"{model}.fmu"), str(tmp_path / f"{model}-{version}.state"),
-        *STATE_CASES[model]] for version, folder in ((2, fmu_dir), (3, fmi3_dir))
-        for model in FMU_MODELS}
+        str(folder / f"{model}.fmu"), fmpy_folder(folder / f"{model}.fmu"),
+        str(tmp_path / f"{model}-{version}.state"), *STATE_CASES[model]]
+        for version, folder in ((2, fmu_dir), (3, fmi3_dir)) for model in FMU_MODELS}
     saved = _state_runs("save", cases)
     restored = _state_runs("restore", cases)
     for case in cases:
@@ -515,9 +528,9 @@ def test_fmu_state_serialized_and_restored_in_a_new_process_continues_bit_identi
 
 ME_STATE_SCRIPT = r'''
 import json, sys
-from fmpy import extract, read_model_description
+from fmpy import read_model_description
 from fmpy.fmi3 import FMU3Model, fmi3Float64
-''' + UNPACKED + r'''
+
 
 def instance(path, start, folder):
     """An initialized Model Exchange instance in continuous-time mode, and what it has."""
@@ -572,8 +585,8 @@ def euler(fmu, nx, nz, t, x, h, steps, outputs, rows):
 
 mode, cases = sys.argv[1], json.loads(sys.argv[2])
 results = {}
-for case, (path, state_file, start, h, before, after) in cases.items():
-    fmu, nx, nz, outputs = instance(path, start, unpacked(path, state_file, mode))
+for case, (path, folder, state_file, start, h, before, after) in cases.items():
+    fmu, nx, nz, outputs = instance(path, start, folder)
     if mode == "save":
         x0 = (fmi3Float64 * nx)()
         fmu.getContinuousStates(x0, nx)
@@ -600,15 +613,16 @@ ME_STATE_CASES = {  # model: (start values, Euler step [s], steps before the sav
 
 
 def test_model_exchange_state_serialized_and_restored_in_a_new_process_continues_bit_identically(
-        fmi3_dir, tmp_path):
+        fmi3_dir, fmpy_folder, tmp_path):
     """The FMI 3.0 Model Exchange interface as the Co-Simulation one above: a process
     integrates the FMU (explicit Euler, event iterations at indicator sign changes: a host's own
     integrator), saves and serializes its state, and goes on; a new process restores that state
     and its own time and continuous states and goes on: the same outputs, bit for bit. The
     clutch's lock and slip modes are in the state: restored without setFMUState, its run
     differs (checked when this test was written)."""
-    cases = {model: [str(fmi3_dir / f"{model}.fmu"), str(tmp_path / f"{model}-me.state"),
-                     *ME_STATE_CASES[model]] for model in ME_STATE_CASES}
+    cases = {model: [str(fmi3_dir / f"{model}.fmu"), fmpy_folder(fmi3_dir / f"{model}.fmu"),
+                     str(tmp_path / f"{model}-me.state"), *ME_STATE_CASES[model]]
+             for model in ME_STATE_CASES}
     saved = _state_runs("save", cases, ME_STATE_SCRIPT)
     restored = _state_runs("restore", cases, ME_STATE_SCRIPT)
     for case in cases:

@@ -69,10 +69,23 @@ def host(tmp_path_factory) -> Path:
     return exe
 
 
-def fmu_line(name: str, fmu: Path, unzip_root: Path) -> str:
+@pytest.fixture(scope="module")
+def unzipped(tmp_path_factory):
+    """The folder fmpy's extract makes of an FMU, once per FMU and module: the hosts only read
+    it (unzipping an FMU for each test cost 45 ms of CPU, 1.5 s over the module)."""
+    root, folders = tmp_path_factory.mktemp("unzipped"), {}
+
+    def folder(fmu: Path) -> str:
+        if fmu not in folders:
+            unzip = root / f"{len(folders)}_{fmu.stem}"
+            folders[fmu] = str(extract(str(fmu), unzipdir=str(unzip)))
+        return folders[fmu]
+    return folder
+
+
+def fmu_line(name: str, fmu: Path, unzipped) -> str:
     md = read_model_description(str(fmu))
-    unzip = extract(str(fmu), unzipdir=str(unzip_root / name))
-    return f"fmu {name} {unzip} {md.coSimulation.modelIdentifier} {md.guid}"
+    return f"fmu {name} {unzipped(fmu)} {md.coSimulation.modelIdentifier} {md.guid}"
 
 
 def run_host(host: Path, config: list[str], tmp: Path, env: dict | None = None,
@@ -106,37 +119,52 @@ def fmpy_reference(fmu: Path, h: float, rtol: float, model: str):
     return _FMPY_RUNS[key]
 
 
-def test_host_embeds_this_python_environment(host, catalog, tmp_path):
+def test_host_embeds_this_python_environment(host, catalog, unzipped, tmp_path):
     """The embedded interpreter is this environment's (same sys.prefix): the FMUs import the same
     numpy/scipy/pythonfmu as fmpy in this process, which the bit-for-bit test relies on."""
-    _, _, stderr = run_host(host, [fmu_line("m", catalog["DcServoMotor"], tmp_path), "steps 1"],
+    _, _, stderr = run_host(host, [fmu_line("m", catalog["DcServoMotor"], unzipped), "steps 1"],
                             tmp_path)
     expected = f"host: python {sys.version.split()[0]} prefix {sys.prefix}"
     assert expected in stderr.splitlines(), stderr
 
 
-@pytest.mark.parametrize("model", list(FMU_MODELS))
-def test_every_fmu_alone_in_the_c_host_matches_fmpy_bit_for_bit(model, host, catalog, tmp_path):
-    fmu = catalog[model]
-    md = read_model_description(str(fmu))
-    h, rtol = float(md.defaultExperiment.stepSize), float(md.defaultExperiment.tolerance)
-    config = [fmu_line(model, fmu, tmp_path), f"step {h!r}", f"steps {N_STEPS}",
-              f"tolerance {rtol!r}"]
-    config += [f"output 0 {v.valueReference} {v.name}" for v in real_outputs(md)]
+def every_fmu_alone(host: Path, catalog, unzipped, tmp_path, env: dict | None = None) -> str:
+    """All catalog FMUs unconnected in one host process, so each runs alone on its start values
+    at its DefaultExperiment's step and tolerance (1 ms and 1e-8 for all): the outputs must be
+    fmpy's in this process, bit for bit (same code, same libraries, same inputs, same steps;
+    the host prints %.17g, which round-trips exactly). One process for all: a Python start
+    and its imports for each FMU were most of this check's time. Returns a summary line."""
+    config, columns = [f"step {1e-3!r}", f"steps {N_STEPS}", f"tolerance {1e-8!r}"], {}
+    for k, model in enumerate(FMU_MODELS):
+        md = read_model_description(str(catalog[model]))
+        assert float(md.defaultExperiment.stepSize) == 1e-3, model  # one step for all
+        assert float(md.defaultExperiment.tolerance) == 1e-8, model
+        config.append(fmu_line(model, catalog[model], unzipped))
+        outs = real_outputs(md)
+        config += [f"output {k} {v.valueReference} {model}.{v.name}" for v in outs]
+        columns[model] = [f"{model}.{v.name}" for v in outs]
     wall = time.perf_counter()
-    names, rows, _ = run_host(host, config, tmp_path)
+    names, rows, _ = run_host(host, config, tmp_path, env=env)
     wall = time.perf_counter() - wall
-    ref_names, ref = fmpy_reference(fmu, h, rtol, model)
-    print(f"\n{model}: C host {N_STEPS} steps of {h:g} s in {wall:.2f} s wall (process incl. "
-          f"Python start), {len(names)} outputs, max |C - fmpy| = {np.max(np.abs(rows - ref)):.3g}")
-    assert names == ref_names
-    assert np.all(np.isfinite(rows))
-    # Same code, same libraries, same inputs (start values), same steps: the C host must give
-    # the very same doubles as fmpy (printed with %.17g, which round-trips exactly).
-    np.testing.assert_array_equal(rows, ref)
+    worst = 0.0
+    for model, cols in columns.items():
+        _, ref = fmpy_reference(catalog[model], 1e-3, 1e-8, model)
+        got = rows[:, [0] + [1 + names.index(c) for c in cols]]
+        assert np.all(np.isfinite(got)), model
+        worst = max(worst, float(np.max(np.abs(got - ref))))
+        np.testing.assert_array_equal(got, ref, err_msg=model)
+    return (f"{len(columns)} FMUs x {N_STEPS} steps in {wall:.2f} s wall incl. Python start; "
+            f"max |C - fmpy| = {worst:.3g}")
 
 
-def test_servo_press_pair_wired_by_the_c_host_matches_crankfmu_jacobi(host, catalog, tmp_path):
+def test_every_fmu_alone_in_the_c_host_matches_fmpy_bit_for_bit(host, catalog, unzipped,
+                                                                tmp_path):
+    """In the host that owns Python: the launchers use its running interpreter."""
+    print("\nC host: " + every_fmu_alone(host, catalog, unzipped, tmp_path))
+
+
+def test_servo_press_pair_wired_by_the_c_host_matches_crankfmu_jacobi(host, catalog, unzipped,
+                                                                     tmp_path):
     """The host wires DcServoMotor and StephensonPress itself (Jacobi, 1 ms, the scene's
     parameters, effects, inputs and connections) and must agree with crankfmu's Jacobi master."""
     from crankfmu.cosim.runner import RunOptions, run_scene
@@ -157,7 +185,7 @@ def test_servo_press_pair_wired_by_the_c_host_matches_crankfmu_jacobi(host, cata
               f"tolerance {scene.master.fmu_tolerance!r}"]
     for c in order:
         comp = scene.components[c]
-        config.append(fmu_line(c, catalog[comp.fmu], tmp_path))
+        config.append(fmu_line(c, catalog[comp.fmu], unzipped))
         config += [f"bool {index[c]} {vr[c][name]} {int(name[7:] in comp.effects)}"
                    for name in vr[c] if name.startswith("effect_")]
         config += [f"real {index[c]} {vr[c][p]} {float(v)!r}" for p, v in comp.parameters.items()]
@@ -212,46 +240,28 @@ def bare_host(tmp_path_factory) -> Path:
     return exe
 
 
-def test_every_fmu_in_the_bare_c_host_matches_fmpy_bit_for_bit(bare_host, catalog, tmp_path):
-    """All catalog FMUs in one bare host process (unconnected, so each runs alone on its start
-    values), in an empty environment: the launchers start Python in the build's environment
-    (this one), so the numbers equal fmpy's in this process bit for bit."""
-    config, columns = [f"step {1e-3!r}", f"steps {N_STEPS}", f"tolerance {1e-8!r}"], {}
-    for k, model in enumerate(FMU_MODELS):
-        md = read_model_description(str(catalog[model]))
-        assert float(md.defaultExperiment.stepSize) == 1e-3  # one step for all
-        assert float(md.defaultExperiment.tolerance) == 1e-8
-        config.append(fmu_line(model, catalog[model], tmp_path))
-        outs = real_outputs(md)
-        config += [f"output {k} {v.valueReference} {model}.{v.name}" for v in outs]
-        columns[model] = [f"{model}.{v.name}" for v in outs]
-    wall = time.perf_counter()
-    names, rows, _ = run_host(bare_host, config, tmp_path, env=BARE_ENV)
-    wall = time.perf_counter() - wall
-    worst = 0.0
-    for model, cols in columns.items():
-        _, ref = fmpy_reference(catalog[model], 1e-3, 1e-8, model)
-        got = rows[:, [0] + [1 + names.index(c) for c in cols]]
-        worst = max(worst, float(np.max(np.abs(got - ref))))
-        np.testing.assert_array_equal(got, ref, err_msg=model)
-    print(f"\nbare C host (no libpython, env -i): {len(columns)} FMUs x {N_STEPS} steps in "
-          f"{wall:.2f} s wall incl. Python start; max |C - fmpy| = {worst:.3g}")
+def test_every_fmu_in_the_bare_c_host_matches_fmpy_bit_for_bit(bare_host, catalog, unzipped,
+                                                               tmp_path):
+    """In the bare host, in an empty environment: the launchers start Python in the build's
+    environment (this one)."""
+    print("\nbare C host (no libpython, env -i): "
+          + every_fmu_alone(bare_host, catalog, unzipped, tmp_path, env=BARE_ENV))
 
 
 def test_bare_host_gets_fmi2error_for_impossible_parameters_and_frees(bare_host, catalog,
-                                                                      tmp_path):
+                                                                      unzipped, tmp_path):
     md = read_model_description(str(catalog["StephensonPress"]))
     l_vr = next(v.valueReference for v in md.modelVariables if v.name == "l")
-    config = [fmu_line("press", catalog["StephensonPress"], tmp_path), f"real 0 {l_vr} 0.01"]
+    config = [fmu_line("press", catalog["StephensonPress"], unzipped), f"real 0 {l_vr} 0.01"]
     _, _, stderr = run_host(bare_host, config, tmp_path, env=BARE_ENV, returncode=3)
     assert "host: fmi2ExitInitializationMode returned status 3 for FMU 0" in stderr  # fmi2Error
     assert "parameter l = 0.01 is not allowed" in stderr  # the reason, logged at error level
     assert "host: freed" in stderr.splitlines()[-1]  # fmi2FreeInstance returned, clean exit
 
 
-def test_bare_host_without_scipy_fails_at_instantiate_naming_scipy(bare_host, catalog,
+def test_bare_host_without_scipy_fails_at_instantiate_naming_scipy(bare_host, catalog, unzipped,
                                                                    tmp_path, no_scipy_env):
-    config = [fmu_line("m", catalog["DcServoMotor"], tmp_path), "steps 1"]
+    config = [fmu_line("m", catalog["DcServoMotor"], unzipped), "steps 1"]
     env = {**BARE_ENV, "CRANKFMU_PYTHON": str(no_scipy_env)}
     _, _, stderr = run_host(bare_host, config, tmp_path, env=env, returncode=2)
     assert "fmi2Instantiate returned NULL" in stderr
@@ -261,8 +271,8 @@ def test_bare_host_without_scipy_fails_at_instantiate_naming_scipy(bare_host, ca
 
 
 def test_bare_host_with_no_python_there_fails_at_instantiate_saying_so(bare_host, catalog,
-                                                                      tmp_path):
-    config = [fmu_line("m", catalog["DcServoMotor"], tmp_path), "steps 1"]
+                                                                      unzipped, tmp_path):
+    config = [fmu_line("m", catalog["DcServoMotor"], unzipped), "steps 1"]
     nowhere = tmp_path / "no-such-python"
     env = {**BARE_ENV, "CRANKFMU_PYTHON": str(nowhere)}
     _, _, stderr = run_host(bare_host, config, tmp_path, env=env, returncode=2)
@@ -288,11 +298,11 @@ def portable_motor(tmp_path_factory) -> Path:
     return fmu
 
 
-def test_a_portable_fmu_finds_python_on_path(bare_host, portable_motor, tmp_path):
+def test_a_portable_fmu_finds_python_on_path(bare_host, portable_motor, unzipped, tmp_path):
     """No builder's environment in the FMU, no CRANKFMU_PYTHON, an empty environment: the
     launcher takes the first suitable python on PATH (this environment's bin first) and the
     numbers are fmpy's in this process, bit for bit."""
-    config = [fmu_line("m", portable_motor, tmp_path), f"step {1e-3!r}", f"steps {N_STEPS}",
+    config = [fmu_line("m", portable_motor, unzipped), f"step {1e-3!r}", f"steps {N_STEPS}",
               f"tolerance {1e-8!r}"]
     md = read_model_description(str(portable_motor))
     outs = real_outputs(md)
@@ -303,7 +313,7 @@ def test_a_portable_fmu_finds_python_on_path(bare_host, portable_motor, tmp_path
     np.testing.assert_array_equal(rows, ref)
 
 
-def test_the_search_says_what_it_tried(bare_host, portable_motor, tmp_path):
+def test_the_search_says_what_it_tried(bare_host, portable_motor, unzipped, tmp_path):
     """A PATH with pythons that will not do: a Python without numpy and scipy (a venv of this
     Python, made empty), and a python of another version (a script answering 3.9): instantiate
     fails, and the message names each candidate and why."""
@@ -315,7 +325,7 @@ def test_the_search_says_what_it_tried(bare_host, portable_motor, tmp_path):
     fake = other / "python3"
     fake.write_text("#!/bin/sh\nprintf '3.9\\n/opt/py39/bin/python3\\n\\n\\n'\n")
     fake.chmod(0o755)
-    config = [fmu_line("m", portable_motor, tmp_path), "steps 1"]
+    config = [fmu_line("m", portable_motor, unzipped), "steps 1"]
     env = {**BARE_ENV, "PATH": f"{empty / 'bin'}:{other}"}
     _, _, stderr = run_host(bare_host, config, tmp_path, env=env, returncode=2)
     message = next(line for line in stderr.splitlines() if "fmi2Instantiate:" in line)
