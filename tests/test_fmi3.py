@@ -75,20 +75,12 @@ def test_model_exchange_refuses_effects_that_change_its_states(fmi3_dir, fmpy_fo
 # -- fmpy: Co-Simulation FMI 2.0 and 3.0, Model Exchange FMI 3.0 --------------------------------
 @pytest.fixture(scope="module")
 def fmpy_folder(tmp_path_factory):
-    """The folder fmpy's extract makes of an FMU, once per FMU and module: simulate_fmu's
-    argument (it takes one as it takes the file; given the file it unzips it at every call and
-    removes the folder after, 45 ms of CPU a call, 1.5 s over these tests) and what the FMU
-    state scripts' processes load. fmpy running the files themselves:
-    tests/test_importer_fmpy.py."""
-    from fmpy import extract
+    """Each FMU unpacked once for the module: simulate_fmu's argument (1.5 s of CPU over these
+    tests against the files) and what the FMU-state scripts' processes load. fmpy running the
+    files themselves: tests/test_importer_fmpy.py."""
+    from tests.support.importer_support import unpacked_once
 
-    root, folders = tmp_path_factory.mktemp("fmpy"), {}
-
-    def folder(fmu: Path) -> str:
-        if fmu not in folders:
-            folders[fmu] = str(extract(str(fmu), str(root / f"{len(folders)}_{fmu.stem}")))
-        return folders[fmu]
-    return folder
+    return unpacked_once(tmp_path_factory.mktemp("fmpy"))
 
 
 START = {  # inputs and effects that make every model move (its states change, events happen)

@@ -25,10 +25,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fmpy import extract, read_model_description
+from fmpy import read_model_description
 
 from crankfmu.models.catalog import FMU_MODELS
-from tests.support.importer_support import real_outputs, step_in_process
+from tests.support.importer_support import real_outputs, step_in_process, unpacked_once
 
 HOST_SOURCE = Path(__file__).resolve().parent / "c_host" / "host.c"
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
@@ -71,16 +71,8 @@ def host(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def unzipped(tmp_path_factory):
-    """The folder fmpy's extract makes of an FMU, once per FMU and module: the hosts only read
-    it (unzipping an FMU for each test cost 45 ms of CPU, 1.5 s over the module)."""
-    root, folders = tmp_path_factory.mktemp("unzipped"), {}
-
-    def folder(fmu: Path) -> str:
-        if fmu not in folders:
-            unzip = root / f"{len(folders)}_{fmu.stem}"
-            folders[fmu] = str(extract(str(fmu), unzipdir=str(unzip)))
-        return folders[fmu]
-    return folder
+    """Each FMU unpacked once for the module (the hosts only read the folder)."""
+    return unpacked_once(tmp_path_factory.mktemp("unzipped"))
 
 
 def fmu_line(name: str, fmu: Path, unzipped) -> str:

@@ -1,5 +1,5 @@
 """Helpers shared by the importer tests (fmpy, C host, mixing, ecos, SSP): the catalog,
-step an FMU, load ecospy."""
+step an FMU, unpack an FMU once, load ecospy."""
 from __future__ import annotations
 
 import os
@@ -22,6 +22,22 @@ def require_ecospy() -> None:
 
 
 IMPORTER_STOP = 0.2  # s: 200 Jacobi steps of 1 ms, through the start-up transient
+
+
+def unpacked_once(root: Path):
+    """A function giving the folder fmpy's extract makes of an FMU under `root`, once per FMU:
+    for hosts that take an unpacked FMU and only read it (fmpy's simulate_fmu takes one as it
+    takes the file; given the file it unzips it at every call, 45 ms of CPU, and removes it)."""
+    from fmpy import extract
+
+    folders: dict[Path, str] = {}
+
+    def folder(fmu: Path) -> str:
+        if fmu not in folders:
+            unzip = root / f"{len(folders)}_{fmu.stem}"
+            folders[fmu] = str(extract(str(fmu), unzipdir=str(unzip)))
+        return folders[fmu]
+    return folder
 
 
 @pytest.fixture(scope="module")
