@@ -658,7 +658,7 @@ def test_a_huge_sweep_grid_is_refused_before_it_is_made(tmp_path):
     code = ("import resource, sys, runpy\n"
             "from crankfmu.cli import parse\n"  # the imports first, then the limit
             "parse(['sweep', 'x', '--vary', 'a.b=1'])\n"
-            "import numpy, fmpy  # what a sweep of a grid imports before its check\n"
+            "import numpy, fmpy  # what a sweep imports\n"
             "soft = int(open('/proc/self/statm').read().split()[0]) * 4096 + (1 << 30)\n"
             "resource.setrlimit(resource.RLIMIT_AS, (soft, soft))\n"
             "from crankfmu.cli import main\n"
