@@ -14,6 +14,7 @@ which the press refuses.
 from __future__ import annotations
 
 import copy
+import itertools
 import math
 import multiprocessing
 import os
@@ -124,9 +125,16 @@ def test_vary_and_grid():
 def test_latin_hypercube_gives_scipys_numbers():
     """Seeded sweeps keep their points: latin_hypercube is scipy.stats.qmc's plain Latin
     hypercube, whose numbers for two designs are written here (scipy 1.17.1,
-    LatinHypercube(d, seed=seed).random(n)); the same for 150 designs (d 1-8, n 1-1000, five
-    seeds) when this was written, exactly."""
+    LatinHypercube(d, seed=seed).random(n)). Full (against the installed scipy, whose import
+    the quick suite spares): 150 designs, d 1-8, n 1-1000, five seeds, exactly;
+    `python scripts/full_checks.py tests/test_sweep.py -k latin_hypercube_gives`."""
     from crankfmu.studies.sweep import latin_hypercube
+    if FULL:
+        from scipy.stats import qmc
+        for d, n, seed in itertools.product((1, 2, 3, 5, 8), (1, 2, 7, 20, 100, 1000),
+                                            (0, 1, 16, 12345, 2 ** 40)):
+            assert np.array_equal(latin_hypercube(d, n, seed),
+                                  qmc.LatinHypercube(d=d, seed=seed).random(n)), (d, n, seed)
 
     scipy_numbers = {
         (2, 4, 0): [[0.09075957816963642, 0.6825533215590325],
