@@ -1,10 +1,14 @@
-"""The test suite's wall time and CPU, this checkout against another commit, alternated.
+"""The test suite's wall time and CPU, this checkout against another commit or Python, alternated.
 
-    python benchmarks/suite_time.py [--against REV] [--repeat 3] [PYTEST ARGS ...]
+    python benchmarks/suite_time.py [--against REV] [--python PYTHON] [--repeat 3] [PYTEST ARGS ...]
 
 Runs `python -m pytest -q -p no:cacheprovider [PYTEST ARGS]` (the README's test command) in
 this checkout and, with --against, in a temporary git worktree of REV (removed at the end),
-taking turns: REV, this, REV, this, ... --repeat times each. A shared machine's speed drifts by
+taking turns: REV, this, REV, this, ... --repeat times each. With --python, the other runs are
+a temporary worktree of HEAD's under the interpreter PYTHON (a venv's python with the test
+extras installed, `PYTHON -m pip install -e ".[test]"`; its own worktree because a build
+records the Python that made it, and the tests check that against theirs): what the
+interpreter's build costs (docs/testing.md, "How long the suite takes"). A shared machine's speed drifts by
 5-10 % over an hour, so only runs made in turn compare. Prints each run's wall time and the
 CPU the whole machine was busy for meanwhile (user + nice + system + irq + softirq from
 /proc/stat, in core-seconds: every process the suite starts, fork servers' children included,
@@ -16,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import statistics
 import subprocess
 import sys
@@ -33,11 +38,13 @@ def busy_seconds() -> float:
     return (user + nice + system + irq + softirq) / os.sysconf("SC_CLK_TCK")
 
 
-def run_suite(checkout: Path, pytest_args: list[str]) -> tuple[float, float, str]:
-    """(wall s, busy core-s, pytest's last line) of one run of the suite in `checkout`."""
+def run_suite(checkout: Path, pytest_args: list[str], python: str = sys.executable
+              ) -> tuple[float, float, str]:
+    """(wall s, busy core-s, pytest's last line) of one run of the suite in `checkout` by the
+    interpreter `python`."""
     env = {**os.environ, "PYTHONPATH": str(checkout / "sources")}
     busy, start = busy_seconds(), time.perf_counter()
-    done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+    done = subprocess.run([python, "-m", "pytest", "-q", "-p", "no:cacheprovider",
                            *pytest_args], cwd=checkout, env=env, capture_output=True, text=True)
     wall, cpu = time.perf_counter() - start, busy_seconds() - busy
     last = (done.stdout.strip().splitlines() or ["(no output)"])[-1]
@@ -47,31 +54,45 @@ def run_suite(checkout: Path, pytest_args: list[str]) -> tuple[float, float, str
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--against", help="a git revision to compare with (a worktree of it)")
+    parser.add_argument("--python", help="another interpreter to run this checkout's suite with")
     parser.add_argument("--repeat", type=int, default=3, help="measured runs per checkout")
     parser.add_argument("--no-warm-up", action="store_true", help="no unmeasured first run")
     args, pytest_args = parser.parse_known_args()
+    if args.against and args.python:
+        parser.error("--against or --python, not both")
+    python = sys.executable
+    if args.python:
+        python = shutil.which(args.python) or args.python
+        if not Path(python).is_file():
+            parser.error(f"--python: no interpreter at {args.python}")
+        if subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=ROOT,
+                          capture_output=True, text=True).stdout.strip():
+            print("note: the other interpreter runs HEAD, without this checkout's uncommitted "
+                  "changes", flush=True)
+    revision = args.against or ("HEAD" if args.python else None)
     with tempfile.TemporaryDirectory(prefix="suite_time_") as tmp:
-        checkouts = {"this": ROOT}
-        if args.against:
+        checkouts = {"this": (ROOT, sys.executable)}
+        if revision:  # a checkout of its own: its fmus/ built by its interpreter
             other = Path(tmp) / "other"
-            subprocess.run(["git", "worktree", "add", "--detach", "-q", str(other),
-                            args.against], cwd=ROOT, check=True)
-            checkouts = {args.against: other, "this": ROOT}
+            subprocess.run(["git", "worktree", "add", "--detach", "-q", str(other), revision],
+                           cwd=ROOT, check=True)
+            checkouts = {args.python or revision: (other, python), "this": checkouts["this"]}
         try:
             return _measure(checkouts, args, pytest_args)
         finally:
-            if args.against:
+            if revision:
                 subprocess.run(["git", "worktree", "remove", "--force", str(other)], cwd=ROOT)
 
 
-def _measure(checkouts: dict[str, Path], args, pytest_args: list[str]) -> int:
+def _measure(checkouts: dict[str, tuple[Path, str]], args, pytest_args: list[str]) -> int:
+    """Each named (checkout, interpreter) in turn, the last one named "this"."""
     if not args.no_warm_up:
-        for name, checkout in checkouts.items():
-            print(f"warm-up {name}: {run_suite(checkout, pytest_args)[2]}", flush=True)
+        for name, (checkout, python) in checkouts.items():
+            print(f"warm-up {name}: {run_suite(checkout, pytest_args, python)[2]}", flush=True)
     runs: dict[str, list[tuple[float, float]]] = {name: [] for name in checkouts}
     for _ in range(args.repeat):
-        for name, checkout in checkouts.items():
-            wall, cpu, last = run_suite(checkout, pytest_args)
+        for name, (checkout, python) in checkouts.items():
+            wall, cpu, last = run_suite(checkout, pytest_args, python)
             runs[name].append((wall, cpu))
             print(f"{name:>12}: {wall:6.1f} s wall, {cpu:6.1f} core-s busy   "
                   f"[{last}] {time.strftime('%H:%M:%S')}", flush=True)
@@ -80,8 +101,8 @@ def _measure(checkouts: dict[str, Path], args, pytest_args: list[str]) -> int:
     for name, (wall, cpu) in medians.items():
         print(f"median {name:>12}: {wall:6.1f} s wall, {cpu:6.1f} core-s busy")
     if len(medians) == 2:
-        (_, (w0, c0)), (_, (w1, c1)) = medians.items()
-        print(f"ratio this / {args.against}: wall {w1 / w0:.3f}, busy {c1 / c0:.3f}")
+        (other, (w0, c0)), (_, (w1, c1)) = medians.items()
+        print(f"ratio this / {other}: wall {w1 / w0:.3f}, busy {c1 / c0:.3f}")
     return 0
 
 
