@@ -245,3 +245,35 @@ def test_two_runs_into_one_folder_leave_one_consistent_set(tmp_path, fmu_dir):
         assert proc.returncode == 0, err
     side = _same_set(out / "servo_press.csv")
     assert side["components"]["press"]["parameters"]["F_max"] in (5e4, 6e4)
+
+
+def test_a_plot_is_drawn_once_and_its_png_is_the_one_savefig_writes(monkeypatch):
+    """A run's plot, laid out by tight_layout, was drawn twice at its save: tight_layout leaves
+    a placeholder layout engine on the figure, and matplotlib's savefig draws a figure that has
+    any engine once to lay it out before the draw that renders it (a third of the save's CPU).
+    figure_png draws it once; its PNG is byte for byte what savefig writes of the same figure
+    with the placeholder left on."""
+    import io
+
+    from matplotlib.figure import Figure
+
+    from crankfmu.cosim.results import figure, figure_png
+
+    t = np.linspace(0.0, 0.3, 301)
+    rows = np.column_stack([t, 40.0 * t, np.sin(40.0 * t), 2e4 * np.cos(40.0 * t)])
+
+    def made():
+        return figure(["press.phi", "press.w_crank", "press.F"], ["rad", "rad/s", "N"], rows,
+                      "servo_press")
+
+    saved = io.BytesIO()
+    made().savefig(saved, format="png", dpi=110)
+    draws = []
+    draw = Figure.draw
+
+    def counted(self, renderer):
+        draws.append(self)
+        return draw(self, renderer)
+    monkeypatch.setattr(Figure, "draw", counted)
+    assert figure_png(made(), dpi=110) == saved.getvalue()
+    assert len(draws) == 1

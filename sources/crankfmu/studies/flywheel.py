@@ -157,7 +157,7 @@ def _write_csv(path: Path, J, delta, a: dict) -> Path:
 
 
 def _plot(path: Path, J, delta, a: dict, fine, af: dict, name: str) -> None:
-    from ..cosim.results import PALETTE, new_figure
+    from ..cosim.results import PALETTE, new_figure, savefig_png
 
     fig = new_figure(figsize=(8, 4.6))
     ax = fig.subplots()
@@ -183,7 +183,7 @@ def _plot(path: Path, J, delta, a: dict, fine, af: dict, name: str) -> None:
     ax.set_title(f"{name}: delta against the flywheel; (28) minimises the gear moment, not delta",
                  fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    savefig_png(fig, path, dpi=110)
 
 
 def write_conventions(conv: dict, path: Path) -> Path:

@@ -642,12 +642,14 @@ def _component(scene, name: str, fmu: str):
 
 
 def save_figures(figures: dict, out_dir: Path) -> list[Path]:
+    from ..cosim.results import savefig_png
+
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = []
     for name, fig in figures.items():
         path = out_dir / name
-        fig.savefig(path, dpi=100)
+        savefig_png(fig, path, dpi=100)
         paths.append(path)
     return paths
 
