@@ -1,6 +1,6 @@
 """The test suite's wall time and CPU, this checkout against another commit or Python, alternated.
 
-    python benchmarks/suite_time.py [--against REV] [--python PYTHON] [--repeat 3] [PYTEST ARGS ...]
+    python benchmarks/suite_time.py [--against REV | --python PYTHON] [--repeat 3] [PYTEST ARGS]
 
 Runs `python -m pytest -q -p no:cacheprovider [PYTEST ARGS]` (the README's test command) in
 this checkout and, with --against, in a temporary git worktree of REV (removed at the end),
@@ -8,13 +8,13 @@ taking turns: REV, this, REV, this, ... --repeat times each. With --python, the 
 a temporary worktree of HEAD's under the interpreter PYTHON (a venv's python with the test
 extras installed, `PYTHON -m pip install -e ".[test]"`; its own worktree because a build
 records the Python that made it, and the tests check that against theirs): what the
-interpreter's build costs (docs/testing.md, "How long the suite takes"). A shared machine's speed drifts by
-5-10 % over an hour, so only runs made in turn compare. Prints each run's wall time and the
-CPU the whole machine was busy for meanwhile (user + nice + system + irq + softirq from
-/proc/stat, in core-seconds: every process the suite starts, fork servers' children included,
-which `/usr/bin/time` misses; run it on an otherwise idle machine), then the medians and their
-ratio. Linux only (/proc/stat). Each checkout's first run may build its FMUs into its fmus/:
-a run before the measured ones warms both (--no-warm-up skips it).
+interpreter's build costs (docs/testing.md, "How long the suite takes"). A shared machine's
+speed drifts by 5-10 % over an hour, so only runs made in turn compare. Prints each run's
+wall time and the CPU the whole machine was busy for meanwhile (user + nice + system + irq +
+softirq from /proc/stat, in core-seconds: every process the suite starts, fork servers'
+children included, which `/usr/bin/time` misses; run it on an otherwise idle machine), then
+the medians and their ratio. Linux only (/proc/stat). Each checkout's first run may build its
+FMUs into its fmus/: a run before the measured ones warms both (--no-warm-up skips it).
 """
 from __future__ import annotations
 
