@@ -159,15 +159,38 @@ def _repository_fmu(model: str, version: int) -> Path:
 
 
 def _stale(model: str, version: int) -> bool:
-    """Is the repository's FMU missing or stale (build.rebuild_reason, as resolve_fmu asks)?"""
+    """Is the repository's FMU missing or stale (build.rebuild_reason, as resolve_fmu asks), or
+    built by another python than this session's (_built_elsewhere)?"""
     from crankfmu.fmu import build_fmi3
     from crankfmu.fmu.build import rebuild_reason
 
     path = _repository_fmu(model, version)
     if version == 2:
-        return rebuild_reason(path, model) is not None
-    build_id = build_fmi3.current_build_id(model, build_fmi3.variant(model, None))
-    return rebuild_reason(path, model, 3, build_id) is not None
+        reason = rebuild_reason(path, model)
+    else:
+        build_id = build_fmi3.current_build_id(model, build_fmi3.variant(model, None))
+        reason = rebuild_reason(path, model, 3, build_id)
+    return reason is not None or _built_elsewhere(path)
+
+
+def _built_elsewhere(path: Path) -> bool:
+    """Does the FMU record a builder's python other than this session's? A run uses such an
+    FMU as it is (the host's interpreter runs it), but the tests check the session's builds:
+    the python the launcher records, a rebuilt FMU's bytes against the catalog's. fmus/ built
+    from another environment (or, before launcher.builder_python, by another name of this
+    interpreter) are built again for the session, as a stale file would be."""
+    import zipfile
+
+    from crankfmu.fmu import launcher
+
+    try:
+        with zipfile.ZipFile(path) as zf:
+            config = zf.read(f"resources/{launcher.CONFIG_NAME}").decode()
+    except (OSError, KeyError, UnicodeDecodeError, zipfile.BadZipFile):
+        return False  # no launcher (no C compiler), or damaged: rebuild_reason's to judge
+    recorded = [v for k, _, v in (line.partition(" = ") for line in config.splitlines())
+                if k == "python"]
+    return bool(recorded) and recorded[0] != launcher.builder_python()
 
 
 def _build_repository_fmu(item: tuple[str, int]) -> None:

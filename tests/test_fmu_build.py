@@ -174,6 +174,28 @@ def _without_binaries(data: bytes) -> bytes:
     return out.getvalue()
 
 
+def test_the_session_catalog_builds_again_what_another_python_built(fmu_dir, tmp_path):
+    """The catalog (tests/conftest.py) copies fmus/ where it is current; an FMU there that
+    records another builder's python (another environment's, or this interpreter by another
+    name, as `crankfmu run` recorded it before launcher.builder_python) is built again: the
+    tests check the session's builds. Before, the README's run command followed by its test
+    command in one checkout failed three tests on such files."""
+    from tests.conftest import _built_elsewhere
+
+    genuine = fmu_dir / "DcServoMotor.fmu"
+    assert not _built_elsewhere(genuine)
+    other = tmp_path / "DcServoMotor.fmu"
+    with zipfile.ZipFile(genuine) as src, zipfile.ZipFile(other, "w") as dst:
+        for info in src.infolist():
+            data = src.read(info)
+            if info.filename.endswith("crankfmu_launcher.txt"):
+                data = b"\n".join(b"python = /elsewhere/venv/bin/python3.11"
+                                  if line.startswith(b"python =") else line
+                                  for line in data.split(b"\n"))
+            dst.writestr(info, data)
+    assert _built_elsewhere(other)
+
+
 @pytest.mark.parametrize("fmi", [2, 3])
 @pytest.mark.parametrize("damage, words", [
     (_truncated, "damaged: File is not a zip file"),

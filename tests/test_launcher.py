@@ -3,6 +3,7 @@ carries, and how it fails, seen from fmpy. Hosts without Python: tests/test_impo
 bare C host) and tests/test_importer_ecos.py (the native ecos command line)."""
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import zipfile
@@ -22,7 +23,10 @@ def test_the_fmu_binary_is_the_launcher_without_python_symbols(fmu_dir, tmp_path
     launcher.write_bytes(files["binaries/linux64/DcServoMotor.so"])
     assert "binaries/linux64/DcServoMotor_pythonfmu.so" in files
     config = files["resources/crankfmu_launcher.txt"].decode()
-    assert f"python = {sys.executable}\n" in config and "requires = numpy scipy\n" in config
+    recorded = [v for k, _, v in (line.partition(" = ") for line in config.splitlines())
+                if k == "python"]
+    assert recorded and os.path.samefile(recorded[0], sys.executable)  # this interpreter
+    assert "requires = numpy scipy\n" in config
     dynamic = subprocess.run(["readelf", "-d", str(launcher)], capture_output=True,
                              text=True).stdout
     assert "libpython" not in dynamic
@@ -39,6 +43,27 @@ def test_the_fmu_binary_is_the_launcher_without_python_symbols(fmu_dir, tmp_path
     assert real_fmi and real_fmi <= set(exported.split())  # every fmi2 function forwarded
     card = files["documentation/index.html"].decode()
     assert "Using the FMUs in other tools" in card and "CRANKFMU_PYTHON" in card
+
+
+def test_the_builder_python_is_recorded_by_one_name_however_python_was_started(monkeypatch):
+    """An FMU records the python that built it. `crankfmu run` (a console script: it starts the
+    environment's python3.11) and `python -m pytest` (python) recorded two names of one
+    interpreter, so the README's run command followed by its test command in one checkout
+    failed three tests (a rebuilt FMU's bytes against the session catalog's, copied from the
+    fmus/ the run had built; the recorded python against the tests'). Every name of this
+    interpreter beside it now records one: the versioned one."""
+    from crankfmu.fmu import launcher
+
+    folder = Path(sys.executable).parent
+    names = [folder / n for n in ("python", "python3", f"python{launcher.python_version()}")]
+    names = [n for n in names if n.exists() and os.path.samefile(n, sys.executable)]
+    assert len(names) >= 2, names  # a venv has all three
+    configs = set()
+    for name in names:
+        monkeypatch.setattr(sys, "executable", str(name))
+        configs.add(launcher.launcher_config("DcServoMotor"))
+    assert len(configs) == 1, configs
+    assert f"python = {names[-1]}\n".encode() in configs.pop()
 
 
 FAILING_INIT = r'''

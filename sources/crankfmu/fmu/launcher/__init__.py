@@ -157,6 +157,23 @@ def python_version() -> str:
         f"{sys.version_info[0]}.{sys.version_info[1]}"
 
 
+def builder_python() -> str:
+    """The builder's python as a build records it: this interpreter by one name however it was
+    started. `python`, `python3` and `python3.11` of an environment are one file, and a process
+    knows the name it was started by (sys.executable): `crankfmu run` (a console script, which
+    starts python3.11) and `python -m pytest` wrote FMUs that differed in this line alone, and
+    the tests after the README's run command failed on them. The versioned name where it is
+    this file, else sys.executable."""
+    started = sys.executable
+    versioned = os.path.join(os.path.dirname(started), f"python{python_version()}")
+    try:
+        if os.path.samefile(started, versioned):
+            return versioned
+    except OSError:  # no such name beside it (Windows' python.exe, an embedded interpreter)
+        pass
+    return started
+
+
 def launcher_config(model_identifier: str) -> bytes:
     """resources/crankfmu_launcher.txt: what the launcher reads at instantiation."""
     lines = [
@@ -167,7 +184,7 @@ def launcher_config(model_identifier: str) -> bytes:
         f"model = {model_identifier}",
     ]
     if not _PORTABLE[0]:
-        lines.append(f"python = {sys.executable}")
+        lines.append(f"python = {builder_python()}")
     lines += [f"python_version = {python_version()}", f"requires = {' '.join(REQUIRES)}"]
     return ("\n".join(lines) + "\n").encode()
 
