@@ -41,6 +41,7 @@ def no_computation(monkeypatch):
     import crankfmu.studies.accuracy
     import crankfmu.studies.compare
     import crankfmu.studies.executor
+    import crankfmu.studies.rocker_analysis
     from crankfmu.cosim import runner
     from crankfmu.system import ssp_export
     monkeypatch.setattr(runner, "load_fmus", computed)
@@ -50,6 +51,7 @@ def no_computation(monkeypatch):
     monkeypatch.setattr(crankfmu.studies.accuracy, "load_or_solve_reference", computed)
     monkeypatch.setattr(crankfmu.studies.compare, "run_for_comparison", computed)
     monkeypatch.setattr(ssp_export, "describe_fmus", computed)
+    monkeypatch.setattr(crankfmu.studies.rocker_analysis, "impact_table", computed)
 
 
 def command(name: str, out: Path) -> list[str]:
@@ -63,13 +65,14 @@ def command(name: str, out: Path) -> list[str]:
                      "--extrapolations", "0", "--jobs", "1"],
         "compare": ["compare", str(SERVO), str(CONVENTIONAL), *stop, "--jobs", "1"],
         "export-ssp": ["export-ssp", str(SERVO), *stop],
-    }[name] + ["--out", str(out)] + ([] if name == "export-ssp" else ["--no-progress"])
+        "analyze": ["analyze", "impact", "--plot", "--scene", str(SCENARIOS / "mo100_impact.toml")],
+    }[name] + ["--out", str(out)] + ([] if name in ("export-ssp", "analyze") else ["--no-progress"])
 
 
 # the name each command writes in its folder, to be taken by something else in the test
 WRITES = {"run": "servo_press.json", "reference": "servo_press_reference.json",
           "sweep": "sweep.json", "accuracy": "accuracy.csv", "compare": "compare.csv",
-          "export-ssp": "servo_press.ssp"}
+          "export-ssp": "servo_press.ssp", "analyze": "impact_forces.png"}
 COMMANDS = list(WRITES)
 
 

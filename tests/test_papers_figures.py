@@ -124,7 +124,8 @@ def test_out_into_a_file_is_a_clear_error(tmp_path, capsys, subject):
     target.write_text("not a directory")
     assert main(["analyze", subject, "--out", str(target)]) == 2
     err = capsys.readouterr().err
-    assert f"--out {target}: is a file" in err and "Traceback" not in err
+    assert f"--out {target}: exists and is a regular file, not a folder" in err  # as run's
+    assert "Traceback" not in err and target.read_text() == "not a directory"
 
 
 def test_missing_scene_is_a_clear_error(tmp_path, capsys):

@@ -114,20 +114,17 @@ def register(sub) -> None:
     fly.set_defaults(func=run_flywheel)
 
 
-def _out_dir(out: Path | None, name: str) -> Path:
-    """--out DIR (default results/analyze-NAME): created if missing; a file there is an error
-    (exit 2)."""
-    from ..errors import CrankfmuError
+def _out_dir(out: Path | None, name: str, files) -> Path:
+    """--out DIR (default results/analyze-NAME), created if missing, and the names of `files`
+    the analysis writes there checked before it computes anything (crankfmu.outputs: a folder
+    that is a file or cannot be written, a name that exists as anything but a regular file, a
+    FIFO, a symbolic link, a folder, is refused, exit 2). The tables are then written with
+    outputs.open_regular and the figures with cosim.results.save_figure: regular files only."""
+    from ..outputs import check_files
 
-    path = out or Path("results") / f"analyze-{name}"
-    if path.exists() and not path.is_dir():
-        raise CrankfmuError(f"--out {path}: is a file; --out takes a folder for the tables and "
-                            "figures")
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise CrankfmuError(f"--out {path}: cannot create the folder ({err.strerror})")
-    return path
+    folder = out or Path("results") / f"analyze-{name}"
+    check_files(folder, files)
+    return folder
 
 
 def _scene_file(path: Path) -> Path:
@@ -159,7 +156,9 @@ def run_press(args) -> int:
 
     _positive(args.masses, "--masses", "kg")
     scene = load_scene(_scene_file(args.scene))
-    out = _out_dir(args.out, "press")
+    out = _out_dir(args.out, "press", ["press_flywheel_28.csv", "press_base_link_mass.csv"] + [
+        "press_dynamic_error.png", "press_base_link.png", "press_flywheel.png",
+        "press_base_link_mass.png"] * args.plot)
     press, m_static, _, u0 = papers.press_models(scene)
     conv = eq28_conventions(press, m_static, u0)
     print(format_conventions(conv, scene.name))
@@ -181,7 +180,9 @@ def run_impact(args) -> int:
     from ..studies.papers import progress
 
     scene = _scene_file(args.scene) if args.plot else None   # before the table is computed
-    out = _out_dir(args.out, "impact")
+    out = _out_dir(args.out, "impact", ["impact_table.csv"]
+                   + ["impact_hertz_peak.csv"] * args.hertz_peak
+                   + ["impact_forces.png", "impact_stiffness.png"] * args.plot)
     changes = {field: getattr(args, dest) for field, dest in
                (("J", "J"), ("m", "m"), ("r", "r"), ("R_c", "r_c"), ("d", "d"), ("E", "E"),
                 ("rho", "rho"), ("nu", "nu"), ("V0", "v0")) if getattr(args, dest) is not None}
@@ -209,7 +210,7 @@ def run_planetary(args) -> int:
     from ..studies import papers
 
     scene = _scene_file(args.scene)
-    out = _out_dir(args.out, "planetary")
+    out = _out_dir(args.out, "planetary", ["planetary.csv"] + ["planetary.png"] * args.plot)
     data = papers.planetary_data(scene)
     print(papers.format_planetary(data))
     written = [papers.write_planetary_csv(data, out / "planetary.csv")]
@@ -224,7 +225,7 @@ def run_stopping(args) -> int:
     from ..studies.papers import save_figures
 
     scene = _scene_file(args.scene)
-    out = _out_dir(args.out, "stopping")
+    out = _out_dir(args.out, "stopping", ["stopping.csv"] + ["stopping.png"] * args.plot)
     sweep = ps.stopping_sweep(scene, args.angles or ps.DEFAULT_ANGLES)
     print(ps.format_table(sweep))
     print("\n".join(ps.verdict(sweep)))
@@ -244,7 +245,8 @@ def run_mill_stand(args) -> int:
     paths = args.mechanisms or [Path("scenarios") / "mechanisms" / f"{m}.toml"
                                 for m in MECHANISMS]
     items = [(m, analyse(m)) for m in (load_mechanism(p) for p in paths)]
-    out = _out_dir(args.out, "mill-stand")
+    out = _out_dir(args.out, "mill-stand",
+                   ["mobility.csv"] + [f"{m.name}.png" for m, _ in items] * args.plot)
     print("\n\n".join(mobility.format_mobility(m, r) for m, r in items))
     written = [mobility.write_csv(items, out / "mobility.csv")]
     if args.plot:
@@ -260,7 +262,8 @@ def run_flywheel(args) -> int:
 
     scene = load_scene(_scene_file(args.scene))
     progress("analyze flywheel: the first approximation at each flywheel")
-    text, written = report(args.csv, scene, _out_dir(args.out, "flywheel"), args.plot)
+    out = _out_dir(args.out, "flywheel", ["flywheel.csv"] + ["flywheel.png"] * args.plot)
+    text, written = report(args.csv, scene, out, args.plot)
     print(text)
     _written(written)
     return 0
@@ -341,7 +344,7 @@ def hammer_figure(runs: dict[str, dict], comp: str = "hammer"):
 def run_hammer(args) -> int:
     from ..studies.papers import save_figures
 
-    out = _out_dir(args.out, "hammer")
+    out = _out_dir(args.out, "hammer", ["hammer_blows.csv"] + ["hammer.png"] * args.plot)
     runs, rows = {}, []
     for csv in args.csv:
         col = read_columns(csv)
@@ -358,9 +361,11 @@ def run_hammer(args) -> int:
 
 def _write_blows(rows: list[dict], path: Path) -> Path:
     import csv
+
+    from ..outputs import open_regular
     keys = (("run", ""), ("n", "1"), ("t", "s"), ("phi", "rad"), ("V_impact", "m/s"),
             ("P_peak", "N"), ("T_peak", "N"))
-    with open(path, "w", newline="") as f:
+    with open_regular(path) as f:
         w = csv.writer(f)
         w.writerow([f"{k} [{u}]" if u else k for k, u in keys])
         w.writerows([r[k] for k, _ in keys] for r in rows)

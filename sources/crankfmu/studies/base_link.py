@@ -28,6 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..outputs import open_regular
+
 CASES = ("base link, gravity on", "base link, gravity off", "counterweight on the crank")
 DEFAULT_MASSES = tuple(float(m) for m in range(0, 401, 20))   # kg: the shipped 20 and 200 on it
 
@@ -152,7 +154,7 @@ def format_table(sweep: dict) -> str:
 
 
 def write_csv(sweep: dict, path: Path) -> Path:
-    with open(path, "w", newline="") as f:
+    with open_regular(path) as f:
         w = csv.writer(f)
         w.writerow(["case", "mass [kg]", "delta_sim [1]", "delta_1 [1]", "L_1 [N.m]",
                     "J0 [kg.m2]"])

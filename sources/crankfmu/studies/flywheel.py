@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..outputs import open_regular
 PARAMETER = "motor.J_flywheel"
 
 
@@ -149,7 +150,7 @@ def report(table_csv: Path, scene, out_dir: Path | None = None, plot: bool = Fal
 
 def _write_csv(path: Path, J, delta, a: dict) -> Path:
     import csv
-    with open(path, "w", newline="") as f:
+    with open_regular(path) as f:
         w = csv.writer(f)
         w.writerow(["J_flywheel [kg.m2]", "delta sweep [1]", "delta_1 [1]", "sqrt(26) [1]"])
         w.writerows(zip(J, delta, a["delta_1"], a["ratio_26"]))
@@ -157,7 +158,7 @@ def _write_csv(path: Path, J, delta, a: dict) -> Path:
 
 
 def _plot(path: Path, J, delta, a: dict, fine, af: dict, name: str) -> None:
-    from ..cosim.results import PALETTE, new_figure, savefig_png
+    from ..cosim.results import PALETTE, new_figure, save_figure
 
     fig = new_figure(figsize=(8, 4.6))
     ax = fig.subplots()
@@ -183,13 +184,13 @@ def _plot(path: Path, J, delta, a: dict, fine, af: dict, name: str) -> None:
     ax.set_title(f"{name}: delta against the flywheel; (28) minimises the gear moment, not delta",
                  fontsize=10)
     fig.tight_layout()
-    savefig_png(fig, path, dpi=110)
+    save_figure(fig, path, dpi=110)
 
 
 def write_conventions(conv: dict, path: Path) -> Path:
     """`eq28_conventions` as CSV: one row per convention."""
     import csv
-    with open(path, "w", newline="") as f:
+    with open_regular(path) as f:
         w = csv.writer(f)
         w.writerow(["convention", "J_M0 [kg.m2]", "J_Mx at the crank [kg.m2]",
                     "J_Mx on the motor shaft [kg.m2]", "relative to the paper's [1]"])

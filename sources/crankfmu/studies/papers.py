@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..outputs import open_regular
 from ..system.scene import SceneError
 from .progress import progress, progress_over  # noqa: F401 - progress: the analyses' notes
 
@@ -642,16 +643,13 @@ def _component(scene, name: str, fmu: str):
 
 
 def save_figures(figures: dict, out_dir: Path) -> list[Path]:
-    from ..cosim.results import savefig_png
+    """Each figure as the PNG `out_dir`/name (cosim.results.save_figure: a regular file,
+    written whole, never replacing anything else)."""
+    from ..cosim.results import save_figure
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    paths = []
-    for name, fig in figures.items():
-        path = out_dir / name
-        savefig_png(fig, path, dpi=100)
-        paths.append(path)
-    return paths
+    return [save_figure(fig, out_dir / name, dpi=100) for name, fig in figures.items()]
 
 
 # =============================================================================================
@@ -943,7 +941,7 @@ def format_planetary(d: dict) -> str:
 def write_planetary_csv(d: dict, path: Path) -> Path:
     """Engagement time against alpha_b (closed form) and the brake torque for a given time."""
     import csv
-    with open(path, "w", newline="") as f:
+    with open_regular(path) as f:
         w = csv.writer(f)
         w.writerow(["alpha_b [1/s]", "engagement time [s]"])
         w.writerows(zip(d["alpha_grid"], d["t_lock_grid"]))

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..outputs import open_regular
 from ..errors import CrankfmuError
 from ..system.scene import SceneError
 
@@ -159,7 +160,7 @@ UNITS = {"angle": "deg", "t_command": "s", "w_crank": "rad/s", "w_a": "rad/s", "
 
 
 def write_csv(sweep: dict, path: Path) -> Path:
-    with open(path, "w", newline="") as f:
+    with open_regular(path) as f:
         w = csv.writer(f)
         w.writerow([f"{k} [{u}]" for k, u in UNITS.items()])
         for j in range(sweep["angle"].size):

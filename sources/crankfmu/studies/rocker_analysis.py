@@ -42,6 +42,7 @@ from ..models.rocker_impact.rocker_linear import (ITERATION_RTOL, K_N_VALUES, S_
                                                   coefficients, exact_linear, extremum,
                                                   first_approximation, first_return_to_zero,
                                                   linearise, support_stiffness)
+from ..outputs import open_regular
 
 
 # -- second approximation -------------------------------------------------------------------
@@ -236,7 +237,7 @@ TABLE_UNITS = {"S_factor": "1", "k_n": "N(2/3)/m", "S": "m", "c": "N/m", "c0": "
 def write_impact_table(rows: Sequence[TableRow], path):
     """The table's rows as CSV, every field with its unit."""
     import csv
-    with open(path, "w", newline="") as f:
+    with open_regular(path) as f:
         w = csv.writer(f)
         w.writerow([f"{k} [{u}]" for k, u in TABLE_UNITS.items()])
         w.writerows([getattr(r, k) for k in TABLE_UNITS] for r in rows)
@@ -402,7 +403,7 @@ def format_hertz_peak_table(rows: Sequence[dict]) -> str:
 
 def write_hertz_peak_table(rows: Sequence[dict], path):
     import csv
-    with open(path, "w", newline="") as f:
+    with open_regular(path) as f:
         w = csv.writer(f)
         w.writerow(["S_factor [1]", "k_n [N(2/3)/m]", "iteration", "c0 [N/m]", "T_peak [N]",
                     "P_peak [N]", "impact_duration [s]"])

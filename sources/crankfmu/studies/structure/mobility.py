@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...outputs import open_regular
 from .analysis import StructureResult
 from .description import Mechanism
 
@@ -161,7 +162,7 @@ def _count_lines(r: StructureResult) -> list:
 
 def write_csv(items, path: Path) -> Path:
     """One row per joint of each (mechanism, result): the table's columns, the pair class."""
-    with open(path, "w", newline="") as f:
+    with open_regular(path) as f:
         w = csv.writer(f)
         w.writerow(["mechanism", "joint", "pair", *COLUMNS, "other"])
         for mech, result in items:
