@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..outputs import open_regular
+
 PARAMETER = "motor.J_flywheel"
 
 

@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..outputs import open_regular
 from ..errors import CrankfmuError
+from ..outputs import open_regular
 from ..system.scene import SceneError
 
 DEFAULT_ANGLES = tuple(float(a) for a in range(90, 361, 15))   # deg after TDC
