@@ -347,19 +347,12 @@ def plot(path: Path, recorder: Recorder, title: str, roles: dict | None = None,
 
 
 def figure_png(fig, dpi: int = 110) -> bytes:
-    """The figure rendered as PNG bytes (rendered before any file is touched)."""
-    buffer = io.BytesIO()
-    savefig_png(fig, buffer, dpi)
-    return buffer.getvalue()
-
-
-def savefig_png(fig, target, dpi: int) -> None:
-    """fig.savefig(target, format="png", dpi=dpi), the figure drawn once. tight_layout leaves a
-    placeholder layout engine on the figure, and savefig draws a figure that has any layout
-    engine twice: first to lay it out, which a placeholder does not do, then to render it
-    (a run's plot: 0.75-0.82 of the CPU once, `python benchmarks/plot_save.py`). The
-    placeholder goes first: the figure is laid out already and its pixels are the same
-    (tests/test_outputs.py and the benchmark compare the bytes)."""
+    """The figure rendered as PNG bytes (rendered before any file is touched), drawn once.
+    tight_layout leaves a placeholder layout engine on the figure, and savefig draws a figure
+    that has any layout engine twice: first to lay it out, which a placeholder does not do,
+    then to render it (a run's plot: 0.75-0.82 of the CPU once, `python
+    benchmarks/plot_save.py`). The placeholder goes first: the figure is laid out already and
+    its pixels are the same (tests/test_outputs.py and the benchmark compare the bytes)."""
     import matplotlib
     from matplotlib.layout_engine import PlaceHolderLayoutEngine
 
@@ -369,7 +362,9 @@ def savefig_png(fig, target, dpi: int) -> None:
         with matplotlib.rc_context({"figure.autolayout": False,
                                     "figure.constrained_layout.use": False}):
             fig.set_layout_engine(None)
-    fig.savefig(target, format="png", dpi=dpi)
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=dpi)
+    return buffer.getvalue()
 
 
 def save_figure(fig, path: Path, dpi: int = 110) -> Path:

@@ -647,9 +647,7 @@ def save_figures(figures: dict, out_dir: Path) -> list[Path]:
     written whole, never replacing anything else)."""
     from ..cosim.results import save_figure
 
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    return [save_figure(fig, out_dir / name, dpi=100) for name, fig in figures.items()]
+    return [save_figure(fig, Path(out_dir) / name, dpi=100) for name, fig in figures.items()]
 
 
 # =============================================================================================
