@@ -188,9 +188,15 @@ def _built_elsewhere(path: Path) -> bool:
             config = zf.read(f"resources/{launcher.CONFIG_NAME}").decode()
     except (OSError, KeyError, UnicodeDecodeError, zipfile.BadZipFile):
         return False  # no launcher (no C compiler), or damaged: rebuild_reason's to judge
-    recorded = [v for k, _, v in (line.partition(" = ") for line in config.splitlines())
-                if k == "python"]
-    return bool(recorded) and recorded[0] != launcher.builder_python()
+    recorded = recorded_python(config)
+    return recorded is not None and recorded != launcher.builder_python()
+
+
+def recorded_python(config: str) -> str | None:
+    """The builder's python a launcher config (resources/crankfmu_launcher.txt) names, None in
+    a portable build's."""
+    return next((v for k, _, v in (line.partition(" = ") for line in config.splitlines())
+                 if k == "python"), None)
 
 
 def _build_repository_fmu(item: tuple[str, int]) -> None:

@@ -75,8 +75,9 @@ def unzipped(tmp_path_factory):
     return unpacked_once(tmp_path_factory.mktemp("unzipped"))
 
 
-def fmu_line(name: str, fmu: Path, unzipped) -> str:
-    md = read_model_description(str(fmu))
+def fmu_line(name: str, fmu: Path, unzipped, md=None) -> str:
+    """The host's `fmu` line; `md`: the FMU's model description where the caller read it."""
+    md = md or read_model_description(str(fmu))
     return f"fmu {name} {unzipped(fmu)} {md.coSimulation.modelIdentifier} {md.guid}"
 
 
@@ -131,7 +132,7 @@ def every_fmu_alone(host: Path, catalog, unzipped, tmp_path, env: dict | None = 
         md = read_model_description(str(catalog[model]))
         assert float(md.defaultExperiment.stepSize) == 1e-3, model  # one step for all
         assert float(md.defaultExperiment.tolerance) == 1e-8, model
-        config.append(fmu_line(model, catalog[model], unzipped))
+        config.append(fmu_line(model, catalog[model], unzipped, md))
         outs = real_outputs(md)
         config += [f"output {k} {v.valueReference} {model}.{v.name}" for v in outs]
         columns[model] = [f"{model}.{v.name}" for v in outs]

@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.conftest import recorded_python
+
 
 def _zip(fmu: Path) -> dict[str, bytes]:
     with zipfile.ZipFile(fmu) as z:
@@ -23,9 +25,8 @@ def test_the_fmu_binary_is_the_launcher_without_python_symbols(fmu_dir, tmp_path
     launcher.write_bytes(files["binaries/linux64/DcServoMotor.so"])
     assert "binaries/linux64/DcServoMotor_pythonfmu.so" in files
     config = files["resources/crankfmu_launcher.txt"].decode()
-    recorded = [v for k, _, v in (line.partition(" = ") for line in config.splitlines())
-                if k == "python"]
-    assert recorded and os.path.samefile(recorded[0], sys.executable)  # this interpreter
+    recorded = recorded_python(config)
+    assert recorded is not None and os.path.samefile(recorded, sys.executable)  # this Python
     assert "requires = numpy scipy\n" in config
     dynamic = subprocess.run(["readelf", "-d", str(launcher)], capture_output=True,
                              text=True).stdout
