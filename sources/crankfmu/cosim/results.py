@@ -93,8 +93,8 @@ def write_csv(path: Path, recorder: Recorder) -> str:
     """The CSV (atomic_write: a regular file, never half written); returns its sha256."""
     def write(f):
         f.write(",".join(["time"] + [f'"{n}"' for n in recorder.names]) + "\n")
-        for row in recorder.rows:
-            f.write(",".join(repr(float(v)) for v in row) + "\n")
+        for row in recorder.rows.tolist():  # Python floats: repr gives the shortest digits
+            f.write(",".join(map(repr, row)) + "\n")
     return atomic_write(path, write)
 
 

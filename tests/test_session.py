@@ -1,0 +1,23 @@
+"""What tests/conftest.py sets up for a test session's processes."""
+from __future__ import annotations
+
+import pytest
+
+from tests.conftest import _my_share, rewritten_pyc
+
+
+def test_each_worker_finds_its_share_of_the_test_files_rewritten(request):
+    """A pytest-xdist worker rewrote its share of the test files before collecting
+    (conftest._rewrite_my_share): pytest's cache holds each, current for the file's contents.
+    Before, where bytecode is not written (PYTHONDONTWRITEBYTECODE=1, the CI machines), no
+    rewritten file was cached and each worker rewrote them all (1.3 s of CPU each)."""
+    from _pytest.assertion import rewrite
+
+    share = _my_share(request.config)
+    if share is None:
+        pytest.skip("only in a pytest-xdist worker, with pytest's assertion rewriting")
+    if not share:
+        pytest.skip("this worker's share of the session's test files is empty")
+    stale = [source.name for source in share if rewrite._read_pyc(source, rewritten_pyc(source))
+             is None]
+    assert stale == [], f"not rewritten before collection: {stale}"
