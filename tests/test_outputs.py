@@ -14,6 +14,7 @@ test's folder, never at real /dev files.
 from __future__ import annotations
 
 import fcntl
+import math
 import hashlib
 import json
 import os
@@ -280,3 +281,22 @@ def test_a_plot_is_drawn_once_and_its_png_is_the_one_savefig_writes(monkeypatch)
     monkeypatch.setattr(Figure, "draw", counted)
     assert figure_png(made(), dpi=110) == saved.getvalue()
     assert len(draws) == 1
+
+
+def test_the_csv_holds_the_recorded_doubles_exactly(tmp_path):
+    """Each value is written as Python's shortest repr of the double (read back, the same bits),
+    the header quotes the names: awkward doubles (subnormal, -0.0, 0.1 + 0.2, huge, an
+    integral value) included."""
+    from crankfmu.cosim.results import Recorder, write_csv
+    values = [5e-324, -0.0, 0.1 + 0.2, 1.7976931348623157e308, 3.0, -2.5e-17]
+    rec = Recorder(["a.x", "b.y"], [None, "m"])
+    for k in range(0, len(values), 2):
+        rec.add(k * 0.1, values[k:k + 2])
+    csv = tmp_path / "r.csv"
+    write_csv(csv, rec)
+    header, *lines = csv.read_text().splitlines()
+    assert header == 'time,"a.x","b.y"'
+    read = [[float(v) for v in line.split(",")] for line in lines]
+    assert [[math.copysign(1, v) for v in row] for row in read] == \
+        [[math.copysign(1, v) for v in row] for row in rec.rows.tolist()]
+    assert read == rec.rows.tolist() and lines[0] == "0.0,5e-324,-0.0"
