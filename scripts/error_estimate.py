@@ -19,11 +19,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from pathlib import Path
 
-import numpy as np
 
 from crankfmu.masters import traits
 from generated_page import write_generated  # scripts/, beside this file
@@ -122,7 +120,7 @@ def rows_for_scene(scene, out: Path, jobs: int):
             continue
         series = {r: load_run(out / "runs", s.label)[0] for r, s in at.items()}
 
-        def est(rs, ratio, knob, nominal, bounds=None):
+        def est(rs, ratio, knob, nominal, bounds=None, series=series):
             runs = [series[r] for r in rs]
             return None if any(x is None for x in runs) else \
                 richardson(metric, runs, ratio, knob, nominal, bounds)
@@ -178,7 +176,7 @@ def table(scene, metric, rows) -> tuple[str, dict]:
             counts[name] += within(e, truth)
             counts[f"{name}_above"] += above and within(e, truth)
 
-        def fmt(e):
+        def fmt(e, truth=truth):
             if e is None:
                 return "no companion run"
             if not e.ok:

@@ -19,7 +19,6 @@ import math
 import sys
 from pathlib import Path
 
-import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 FACTORS = (1.0, 2.0, 4.0, 8.0, 16.0, 32.0)

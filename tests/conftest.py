@@ -364,6 +364,14 @@ def catalog(fmu_dir) -> dict[str, Path]:
     return {model: fmu_dir / f"{model}.fmu" for model in FMU_MODELS}
 
 
+@pytest.fixture(scope="module")
+def jacobi_scene():
+    """The servo press as the peers run it (tests/support/importer_support.py), for a module:
+    the importer tests change its settings and put them back."""
+    from tests.support.importer_support import servo_press_as_the_peers_run_it
+    return servo_press_as_the_peers_run_it()
+
+
 @pytest.fixture
 def short_tmp():
     """An empty folder with a short path, for a process's temporary folder (TMPDIR) where its

@@ -68,7 +68,8 @@ def balance(r, crank_kinetic=0.0):
     """Motor work minus every sink: drive kinetic energy (sun, ring, carrier with the crank's
     inertia shaft_J), hammer's mechanical energy (rocker, rod spring, contact), the brakes, the
     drive's resistances, radiation into the tool, the rod damper. Relative to the motor work."""
-    d = lambda k: r[k] - r[k][0]
+    def d(k):
+        return r[k] - r[k][0]
     sinks = (d("drive.E_kin") + d("hammer.E_mech") - crank_kinetic + r["drive.E_brake_b"]
              + r["drive.E_brake_h"] + r["drive.E_resist"] + r["hammer.E_radiated"]
              + r["hammer.E_damped"])

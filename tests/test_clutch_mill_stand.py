@@ -64,7 +64,8 @@ def reference():
 
 
 def balance(r):
-    d = lambda k: r[k] - r[k][0]
+    def d(k):
+        return r[k] - r[k][0]
     sinks = (d("drive.E_kin") + r["drive.E_brake_b"] + r["drive.E_brake_h"]
              + r["drive.E_resist"] + r["stand.E_friction"] + r["stand.E_load"])
     return float(np.max(np.abs(r["drive.W_sun"] - sinks)) / np.max(np.abs(r["drive.W_sun"])))

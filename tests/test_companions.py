@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import SCENARIOS
-from tests.test_sweep import kill_9_mid_run, rotor_fmu_dir, spinner  # noqa: F401
+from tests.test_sweep import kill_9_mid_run, spinner
 from crankfmu.cosim.companions import Companions
 from crankfmu.cosim.runner import RunOptions, run_companion, run_scene
 from crankfmu.cosim.target import search
@@ -95,7 +95,7 @@ def test_a_run_that_stops_does_not_wait_for_its_companion(fmu_dir, monkeypatch):
 
 @pytest.mark.skipif(not Path("/proc/self/stat").is_file(), reason="reads /proc (Linux)")
 @pytest.mark.parametrize("start_method", ["fork", "spawn"])
-def test_kill_9_of_a_run_ends_its_companion_worker(tmp_path, rotor_fmu_dir, start_method,
+def test_kill_9_of_a_run_ends_its_companion_worker(tmp_path, fmu_dir, start_method,
                                                    short_tmp):
     """`crankfmu run --jobs 2` runs its estimate's companion in a worker; killed with kill -9
     mid-run, the run leaves no process and no temporary folder behind within 30 s (a loaded
@@ -104,7 +104,7 @@ def test_kill_9_of_a_run_ends_its_companion_worker(tmp_path, rotor_fmu_dir, star
     pool, spawned) went on with its companion run and waited on its task queue for good."""
     scene = spinner(tmp_path, stop=200.0)  # a run of seconds: killed mid-run
     _, left, tmp = kill_9_mid_run(["run", str(scene), "--jobs", "2", "--fmus",
-                                   str(rotor_fmu_dir), "--out", str(tmp_path / "out"),
+                                   str(fmu_dir), "--out", str(tmp_path / "out"),
                                    "--no-progress"], short_tmp, start_method, workers=1)
     assert left == [], left
     assert not [p.name for p in tmp.iterdir() if p.name.startswith("crankfmu-")]

@@ -20,7 +20,7 @@ from crankfmu.cosim.metrics import ReferenceSamples
 from crankfmu.cosim.runner import RunOptions, run_scene
 from crankfmu.cosim.target import TargetNotMet, search
 from crankfmu.system.load import load_scene
-from tests.test_masters import OSCILLATOR, exact_speeds, rotor_fmus, scene_file  # noqa: F401
+from tests.test_masters import OSCILLATOR, exact_speeds, scene_file
 
 SPEEDS = ["r1.flange_w", "r2.w"]
 
@@ -44,7 +44,7 @@ def true_error(scene, recorder) -> float:
 @pytest.mark.parametrize("algorithm, extrapolation", [
     ("jacobi", 0), ("jacobi", 2), ("gauss-seidel", 0), ("gauss-seidel", 1),
     ("gauss-seidel", 2), ("iterative", 2)])
-def test_estimate_tracks_the_true_error_across_steps_and_orders(tmp_path, rotor_fmus,
+def test_estimate_tracks_the_true_error_across_steps_and_orders(tmp_path, fmu_dir,
                                                                 algorithm, extrapolation):
     truths, estimates = [], []
     for h in (2.5e-3, 1.25e-3):
@@ -52,7 +52,7 @@ def test_estimate_tracks_the_true_error_across_steps_and_orders(tmp_path, rotor_
         if algorithm == "iterative":
             master["tolerance"] = 1e-10  # iterated to convergence (test_masters.py)
         scene = oscillator(tmp_path, master)
-        result = run_scene(scene, RunOptions(out=tmp_path / "osc.csv", fmu_dir=rotor_fmus,
+        result = run_scene(scene, RunOptions(out=tmp_path / "osc.csv", fmu_dir=fmu_dir,
                                              progress=False, estimate=True))
         truths.append(true_error(scene, result.recorder))
         estimates.append(result.estimate.error)
@@ -64,11 +64,11 @@ def test_estimate_tracks_the_true_error_across_steps_and_orders(tmp_path, rotor_
     assert estimates[0] / estimates[1] == pytest.approx(truths[0] / truths[1], rel=0.15)
 
 
-def test_estimate_is_in_the_sidecar(tmp_path, rotor_fmus):
+def test_estimate_is_in_the_sidecar(tmp_path, fmu_dir):
     import json
     scene = oscillator(tmp_path, {"algorithm": "gauss-seidel", "step": 5e-3,
                                   "extrapolation": 1}, stop=0.3)
-    result = run_scene(scene, RunOptions(out=tmp_path / "osc.csv", fmu_dir=rotor_fmus,
+    result = run_scene(scene, RunOptions(out=tmp_path / "osc.csv", fmu_dir=fmu_dir,
                                          progress=False, estimate=True))
     side = json.loads((tmp_path / "osc.json").read_text())["error_estimate"]
     assert side["estimated_error"] == result.estimate.error > 0
@@ -84,7 +84,7 @@ def test_estimate_is_in_the_sidecar(tmp_path, rotor_fmus):
         "(max_t |y - y_ref| / mean|y_ref|): Richardson from a companion at 0.5 x the step")
 
 
-def test_accuracy_column_matches_the_run_estimate(tmp_path, rotor_fmus):
+def test_accuracy_column_matches_the_run_estimate(tmp_path, fmu_dir):
     """The sweep's estimated_error (companions from the sweep's own runs' CSVs) is the number
     `crankfmu run` reports (companions run in process): runs are deterministic and CSVs
     hold repr floats, so they agree to round-off (1e-12 relative)."""
@@ -93,20 +93,20 @@ def test_accuracy_column_matches_the_run_estimate(tmp_path, rotor_fmus):
                                   "extrapolation": 2}, stop=0.3)
     result = run_accuracy(scene, AccuracyOptions(
         out_dir=tmp_path / "acc", algorithms=["gauss-seidel"], extrapolations=[2],
-        steps=[5e-3], fmu_dir=rotor_fmus, progress=False, jobs=1, plot=True))
+        steps=[5e-3], fmu_dir=fmu_dir, progress=False, jobs=1, plot=True))
     with open(result.csv) as f:
         rows = list(csv.DictReader(f))
     assert len(rows) == 1  # the companion (2.5 ms) is not a row of the table
-    run = run_scene(scene, RunOptions(out=None, fmu_dir=rotor_fmus, progress=False,
+    run = run_scene(scene, RunOptions(out=None, fmu_dir=fmu_dir, progress=False,
                                       estimate=True))
     assert float(rows[0]["estimated_error"]) == pytest.approx(run.estimate.error, rel=1e-12)
     assert (tmp_path / "acc" / "estimate_vs_error.png").is_file()
 
 
-def test_target_is_met_without_a_reference(tmp_path, rotor_fmus):
+def test_target_is_met_without_a_reference(tmp_path, fmu_dir):
     scene = oscillator(tmp_path, {"algorithm": "gauss-seidel", "step": 5e-3}, stop=0.5)
     progress = []
-    result, report = search(scene, 1e-4, rotor_fmus, echo=progress.append)
+    result, report = search(scene, 1e-4, fmu_dir, echo=progress.append)
     assert report.met and report.estimate.error <= 1e-4
     # a line per run and per estimate, the last estimate the accepted one's
     assert sum(line.startswith("run ") for line in progress) == len(report.runs)
@@ -118,8 +118,8 @@ def test_target_is_met_without_a_reference(tmp_path, rotor_fmus):
     assert true_error(scene, result.recorder) <= 1e-4
 
 
-def test_target_that_cannot_be_met_says_why(tmp_path, rotor_fmus):
+def test_target_that_cannot_be_met_says_why(tmp_path, fmu_dir):
     # 1e-14 is below what a step of 5e-3/64 s gives (about 1e-9 at extrapolation 2)
     scene = oscillator(tmp_path, {"algorithm": "gauss-seidel", "step": 5e-3}, stop=0.05)
     with pytest.raises(TargetNotMet, match=r"step would fall below|stopped falling"):
-        search(scene, 1e-14, rotor_fmus)
+        search(scene, 1e-14, fmu_dir)

@@ -15,8 +15,7 @@ from tests.support.importer_support import require_ecospy
 require_ecospy()
 from crankfmu.interop import ecos  # noqa: E402
 from crankfmu.interop.plan import plan_scene, plan_single_fmu  # noqa: E402
-from tests.support.importer_support import (IMPORTER_STOP, catalog_fmus, jacobi_scene,  # noqa: E402,F401
-                              relative_deviation)
+from tests.support.importer_support import IMPORTER_STOP, relative_deviation  # noqa: E402
 
 STOP = IMPORTER_STOP  # s (importer_support: 200 Jacobi steps of 1 ms)
 
@@ -33,13 +32,13 @@ def gauss_seidel_run(jacobi_scene, fmu_dir, tmp_path):
 
 
 @pytest.mark.parametrize("model", list(FMU_MODELS))
-def test_every_fmu_runs_alone_on_its_start_values(catalog_fmus, model):
+def test_every_fmu_runs_alone_on_its_start_values(fmu_dir, model):
     """No input connected, nothing set: ecos initializes and steps the FMU for 0.05 s, and gives
     the numbers libcosim gives (when libcosimpy is installed): two independent importers, the
     same FMU, step and default tolerance. 1e-9 relative as for the connected scene; measured
     0 for most FMUs, 5.5e-13 at most (RockerImpact; the engines' clocks differ in the last
     bits)."""
-    plan = plan_single_fmu(catalog_fmus / f"{model}.fmu", stop_time=0.05, step=1e-3)
+    plan = plan_single_fmu(fmu_dir / f"{model}.fmu", stop_time=0.05, step=1e-3)
     result = ecos.run(plan)
     assert len(result.times) == 51 and result.times[-1] == pytest.approx(0.05, abs=1e-15)
     assert plan.record, f"{model} has no Real output"
@@ -155,12 +154,12 @@ def _unconnected_ssp(fmus: dict, path):
     return path
 
 
-def test_every_fmu_runs_in_the_native_ecos_cli_as_in_fmpy(catalog_fmus, ecos_cli, tmp_path):
+def test_every_fmu_runs_in_the_native_ecos_cli_as_in_fmpy(fmu_dir, ecos_cli, tmp_path):
     """All catalog FMUs, unconnected, in one native ecos run (one Python start): each on its
     start values, compared with fmpy stepping the same FMU alone in this process."""
     from crankfmu.fmu.instance import FmuInstance  # noqa: F401 (the exit-order fix in this process)
     from tests.support.importer_support import step_in_process
-    fmus = {model: catalog_fmus / f"{model}.fmu" for model in FMU_MODELS}
+    fmus = {model: fmu_dir / f"{model}.fmu" for model in FMU_MODELS}
     got = run_ecos_cli(ecos_cli, _unconnected_ssp(fmus, tmp_path / "catalog.ssp"), NATIVE_STOP,
                        tmp_path)
     for model, path in fmus.items():
@@ -206,7 +205,7 @@ def test_servo_press_ssp_in_the_native_ecos_cli_equals_crankfmu_jacobi(jacobi_sc
 
 
 # -- FMI 3.0 Co-Simulation in the native ecos (its FMI 3.0 support: fmilibcpp) -------------------
-def test_every_fmi3_fmu_runs_in_the_native_ecos_cli_as_in_fmpy(catalog_fmus, fmi3_dir, ecos_cli,
+def test_every_fmi3_fmu_runs_in_the_native_ecos_cli_as_in_fmpy(fmu_dir, fmi3_dir, ecos_cli,
                                                               tmp_path):
     """Every catalog model's FMI 3.0 FMU, unconnected, in one native ecos run from an empty
     environment (the FMI 3.0 launcher starts Python): the numbers fmpy gives for the FMI 2.0
@@ -217,7 +216,7 @@ def test_every_fmi3_fmu_runs_in_the_native_ecos_cli_as_in_fmpy(catalog_fmus, fmi
     got = run_ecos_cli(ecos_cli, _unconnected_ssp(fmus, tmp_path / "catalog3.ssp"), NATIVE_STOP,
                        tmp_path)
     for model in FMU_MODELS:
-        names, ref = step_in_process(catalog_fmus / f"{model}.fmu", 1e-3,
+        names, ref = step_in_process(fmu_dir / f"{model}.fmu", 1e-3,
                                      round(NATIVE_STOP / 1e-3), 1e-8, name=model)
         ref = ref[:len(got["time"])]
         for k, name in enumerate(names):

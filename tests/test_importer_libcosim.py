@@ -15,16 +15,15 @@ from crankfmu.system.scene import SceneError
 pytest.importorskip("libcosimpy")
 from crankfmu.interop import libcosim  # noqa: E402
 from crankfmu.interop.plan import plan_scene, plan_single_fmu  # noqa: E402
-from tests.support.importer_support import (IMPORTER_STOP, catalog_fmus, jacobi_scene,  # noqa: E402,F401
-                              relative_deviation)
+from tests.support.importer_support import IMPORTER_STOP, relative_deviation  # noqa: E402
 
 STOP = IMPORTER_STOP  # s (importer_support: 200 Jacobi steps of 1 ms)
 
 
 @pytest.mark.parametrize("model", list(FMU_MODELS))
-def test_every_fmu_runs_alone_on_its_start_values(catalog_fmus, model):
+def test_every_fmu_runs_alone_on_its_start_values(fmu_dir, model):
     """No input connected, nothing set: libcosim initializes and steps the FMU for 0.05 s."""
-    plan = plan_single_fmu(catalog_fmus / f"{model}.fmu", stop_time=0.05, step=1e-3)
+    plan = plan_single_fmu(fmu_dir / f"{model}.fmu", stop_time=0.05, step=1e-3)
     result = libcosim.run(plan)
     assert len(result.times) == 51 and result.times[-1] == pytest.approx(0.05, abs=1e-15)
     assert plan.record, f"{model} has no Real output"

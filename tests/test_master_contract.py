@@ -24,8 +24,7 @@ from crankfmu.masters.scale import DivergenceError, ErrorScale, check_finite
 from crankfmu.system.load import load_scene
 from crankfmu.system.scene import SceneError
 from tests.examples.masters.iterated_gauss_seidel import IteratedGaussSeidel
-from tests.test_masters import (OSCILLATOR, STEPS, orders, rotor_fmus, run,  # noqa: F401
-                                scene_file, speed_error)
+from tests.test_masters import OSCILLATOR, STEPS, orders, run, scene_file, speed_error
 
 EXAMPLE = IteratedGaussSeidel.name
 
@@ -40,30 +39,30 @@ def example_master():
 
 
 # -- the example master ----------------------------------------------------------------------
-def test_example_master_one_sweep_is_gauss_seidel_bit_for_bit(tmp_path, rotor_fmus,
+def test_example_master_one_sweep_is_gauss_seidel_bit_for_bit(tmp_path, fmu_dir,
                                                               example_master):
     """One pass is the Gauss-Seidel sweep with held inputs: the same floats, not just close."""
-    mine = run(tmp_path, rotor_fmus, {"algorithm": EXAMPLE, "sweeps": 1, "step": 5e-3})
-    gs = run(tmp_path, rotor_fmus, {"algorithm": "gauss-seidel", "step": 5e-3})
+    mine = run(tmp_path, fmu_dir, {"algorithm": EXAMPLE, "sweeps": 1, "step": 5e-3})
+    gs = run(tmp_path, fmu_dir, {"algorithm": "gauss-seidel", "step": 5e-3})
     assert mine.recorder.rows.tobytes() == gs.recorder.rows.tobytes()
     assert mine.master_statistics["passes"] == 200
 
 
-def test_example_master_converges_to_second_order(tmp_path, rotor_fmus, example_master):
+def test_example_master_converges_to_second_order(tmp_path, fmu_dir, example_master):
     """Converged passes give the trapezoidal coupling: order 2 (within +-0.3, as the shipped
     masters' orders in test_masters.py), and at h = 5 ms the error of the iterative master with
     linear interpolation (same coupling, converged by Newton to 1e-10) within 5 %: six passes
     contract the waveform error by (w h)^6 ~ 1e-6 here (w = 17.6 rad/s)."""
-    errors = [speed_error(run(tmp_path, rotor_fmus, {"algorithm": EXAMPLE, "sweeps": 6,
-                                                     "step": h})) for h in STEPS]
+    errors = [speed_error(run(tmp_path, fmu_dir, {"algorithm": EXAMPLE, "sweeps": 6,
+                                                  "step": h})) for h in STEPS]
     for q in orders(errors):
         assert abs(q - 2) < 0.3, (errors, orders(errors))
-    iterative = speed_error(run(tmp_path, rotor_fmus, {"algorithm": "iterative", "step": STEPS[1],
-                                                       "extrapolation": 0, "tolerance": 1e-10}))
+    iterative = speed_error(run(tmp_path, fmu_dir, {"algorithm": "iterative", "step": STEPS[1],
+                                                    "extrapolation": 0, "tolerance": 1e-10}))
     assert abs(errors[1] - iterative) < 0.05 * iterative, (errors[1], iterative)
 
 
-def test_example_master_options_are_checked_where_given(tmp_path, rotor_fmus, example_master,
+def test_example_master_options_are_checked_where_given(tmp_path, fmu_dir, example_master,
                                                         capsys):
     from crankfmu.cli import main
     from crankfmu.system.scene import parse_scene
@@ -84,10 +83,10 @@ def test_example_master_options_are_checked_where_given(tmp_path, rotor_fmus, ex
     path = scene_file(tmp_path, {"algorithm": EXAMPLE}, OSCILLATOR,
                       0.05, None)
     out = tmp_path / "cli"  # the output folder
-    assert main(["run", str(path), "--fmus", str(rotor_fmus), "--out", str(out), "--sweeps",
+    assert main(["run", str(path), "--fmus", str(fmu_dir), "--out", str(out), "--sweeps",
                  "0", "--no-progress"]) == 2
     assert "--sweeps: must be an integer from 1 to 50" in capsys.readouterr().err
-    assert main(["run", str(path), "--fmus", str(rotor_fmus), "--out", str(out), "--sweeps",
+    assert main(["run", str(path), "--fmus", str(fmu_dir), "--out", str(out), "--sweeps",
                  "3", "--no-progress"]) == 0
     side = json.loads((out / f"{path.stem}.json").read_text())
     assert side["master"]["sweeps"] == 3 and "tolerance" not in side["master"]
@@ -170,7 +169,7 @@ def test_option_checks_name_what_is_allowed():
         ex.check(3)
 
 
-def test_an_option_set_in_code_is_checked_when_the_run_starts(tmp_path, rotor_fmus):
+def test_an_option_set_in_code_is_checked_when_the_run_starts(tmp_path, fmu_dir):
     """Code may set m.tolerance unchecked (sweeps set it for every setting); the master checks
     its own options before the first step and the runner names the key."""
     from crankfmu.cosim.runner import RunOptions, run_scene
@@ -178,7 +177,7 @@ def test_an_option_set_in_code_is_checked_when_the_run_starts(tmp_path, rotor_fm
                                   OSCILLATOR, 0.05, None))
     scene.master.tolerance = float("nan")
     with pytest.raises(SceneError, match=r"\[master\].tolerance: must be a finite number"):
-        run_scene(scene, RunOptions(fmu_dir=rotor_fmus, progress=False))
+        run_scene(scene, RunOptions(fmu_dir=fmu_dir, progress=False))
 
 
 # -- the parts, each alone (fake systems: only what each part reads) -------------------------

@@ -33,11 +33,6 @@ OSCILLATOR = dict(J1=1.0, c1=10.0, d1=0.0, J2=0.5, k=100.0, ds=0.5, c2=0.0, d2=0
 STEPS = (1e-2, 5e-3, 2.5e-3)  # s; the record grid 1e-2 s is common to all three
 
 
-@pytest.fixture(scope="module")
-def rotor_fmus(fmu_dir):
-    return fmu_dir  # the session's catalog (tests/conftest.py)
-
-
 def scene_file(tmp_path, master: dict, p: dict, stop: float, record: float | None):
     lines = "\n".join(f"{k} = {json.dumps(v)}" for k, v in master.items())
     interval = f"interval = {record}" if record else ""
@@ -105,9 +100,9 @@ def omega_max(p=OSCILLATOR) -> float:
 
 @pytest.mark.parametrize("algorithm", ["jacobi", "gauss-seidel"])
 @pytest.mark.parametrize("extrapolation", [0, 1, 2])
-def test_fixed_step_masters_error_and_order(tmp_path, rotor_fmus, algorithm, extrapolation):
-    errors = [speed_error(run(tmp_path, rotor_fmus, {"algorithm": algorithm, "step": h,
-                                                     "extrapolation": extrapolation}))
+def test_fixed_step_masters_error_and_order(tmp_path, fmu_dir, algorithm, extrapolation):
+    errors = [speed_error(run(tmp_path, fmu_dir, {"algorithm": algorithm, "step": h,
+                                                  "extrapolation": extrapolation}))
               for h in STEPS]
     # Bound: an input extrapolated with order p misses a signal of frequency w by about
     # (w h)^(p+1) of its amplitude per step; the global error stays below that size here.
@@ -117,9 +112,9 @@ def test_fixed_step_masters_error_and_order(tmp_path, rotor_fmus, algorithm, ext
         assert abs(q - (extrapolation + 1)) < 0.3, (errors, orders(errors))
 
 
-def test_iterative_master_converges_to_the_reference(tmp_path, rotor_fmus):
-    results = {k: [run(tmp_path, rotor_fmus, {"algorithm": "iterative", "step": h,
-                                              "extrapolation": k, "tolerance": 1e-10})
+def test_iterative_master_converges_to_the_reference(tmp_path, fmu_dir):
+    results = {k: [run(tmp_path, fmu_dir, {"algorithm": "iterative", "step": h,
+                                           "extrapolation": k, "tolerance": 1e-10})
                    for h in STEPS[:2]] for k in (0, 2)}
     for k, expected in ((0, 2), (2, 3)):  # linear (trapezoidal) / quadratic interpolation
         errors = [speed_error(r) for r in results[k]]
@@ -130,20 +125,20 @@ def test_iterative_master_converges_to_the_reference(tmp_path, rotor_fmus):
     # A given accuracy at a larger step: at h = 1e-2 s the iterative master (order 3) is more
     # than 3 times as accurate as Gauss-Seidel with extrapolation 2 (measured 3.2e-4 against
     # 1.3e-3), i.e. Gauss-Seidel needs a step below 0.7 h to match it.
-    gs = speed_error(run(tmp_path, rotor_fmus, {"algorithm": "gauss-seidel", "step": STEPS[0],
-                                                "extrapolation": 2}))
+    gs = speed_error(run(tmp_path, fmu_dir, {"algorithm": "gauss-seidel", "step": STEPS[0],
+                                             "extrapolation": 2}))
     assert speed_error(results[2][0]) < gs / 3
 
 
-def test_adaptive_master_meets_tolerance_with_fewer_steps(tmp_path, rotor_fmus):
+def test_adaptive_master_meets_tolerance_with_fewer_steps(tmp_path, fmu_dir):
     """A damped oscillation (decays within about 1 s of 3 s): the adaptive master takes small
     steps while it rings and long ones after. Measured: tolerance 1e-4 -> error 3.0e-5 in 584
     accepted + 16 rejected steps; fixed-step Gauss-Seidel with 600 steps: error 1.0e-4."""
     damped = dict(OSCILLATOR, d1=0.3, ds=1.0)
     tol = 1e-4
-    adaptive = run(tmp_path, rotor_fmus, {"algorithm": "adaptive", "extrapolation": 2,
-                                          "tolerance": tol, "step": 1e-3, "min_step": 1e-6,
-                                          "max_step": 0.1}, damped, stop=3.0, record=None)
+    adaptive = run(tmp_path, fmu_dir, {"algorithm": "adaptive", "extrapolation": 2,
+                                       "tolerance": tol, "step": 1e-3, "min_step": 1e-6,
+                                       "max_step": 0.1}, damped, stop=3.0, record=None)
     stats = adaptive.master_statistics
     tries = stats["accepted_steps"] + stats["rejected_steps"]
     times = adaptive.recorder.rows[:, 0]
@@ -154,8 +149,8 @@ def test_adaptive_master_meets_tolerance_with_fewer_steps(tmp_path, rotor_fmus):
     # error is that size too (measured 0.3 tol), so the bound is tol.
     assert error < tol
     # Fixed step with as many doSteps as the adaptive master made (rejected ones included):
-    fixed = run(tmp_path, rotor_fmus, {"algorithm": "gauss-seidel", "extrapolation": 2,
-                                       "step": 3.0 / tries}, damped, stop=3.0, record=None)
+    fixed = run(tmp_path, fmu_dir, {"algorithm": "gauss-seidel", "extrapolation": 2,
+                                    "step": 3.0 / tries}, damped, stop=3.0, record=None)
     assert speed_error(fixed, damped) > 2 * error
 
 
@@ -200,7 +195,7 @@ def total_energy(result_or_csv) -> np.ndarray:
     return rows[:, 3] + rows[:, 4]
 
 
-def test_stiff_coupling_jacobi_unstable_iterative_stable(tmp_path, rotor_fmus):
+def test_stiff_coupling_jacobi_unstable_iterative_stable(tmp_path, fmu_dir):
     """Stiff shaft, light rotor, no damping: the exact solution keeps E = J1 w1^2/2 + c1 phi1^2/2
     + J2 w2^2/2 + k theta^2/2 constant (= E0 = 0.5 J). At h = 1e-3 s (w_max h = 3.2) explicit
     Jacobi with held inputs pumps energy in (measured: x3.8 in 0.2 s, x4e10 in 1 s); the
@@ -208,14 +203,14 @@ def test_stiff_coupling_jacobi_unstable_iterative_stable(tmp_path, rotor_fmus):
     per period of the stiff mode) with no growth from the first to the last fifth."""
     h, stop = 1e-3, 0.5
     try:
-        energy = total_energy(run(tmp_path, rotor_fmus, {"algorithm": "jacobi", "step": h},
+        energy = total_energy(run(tmp_path, fmu_dir, {"algorithm": "jacobi", "step": h},
                                   STIFF, stop=stop, record=h))
     except RunError as err:  # diverged: the rows up to then are in the CSV
         energy = total_energy(err.csv)
     assert energy[0] == pytest.approx(0.5)
     assert energy.max() > 10 * energy[0]
 
-    result = run(tmp_path, rotor_fmus, {"algorithm": "iterative", "step": h, "tolerance": 1e-8},
+    result = run(tmp_path, fmu_dir, {"algorithm": "iterative", "step": h, "tolerance": 1e-8},
                  STIFF, stop=stop, record=h)
     energy = total_energy(result)
     assert result.master_statistics["non_converged_steps"] == 0
@@ -224,13 +219,13 @@ def test_stiff_coupling_jacobi_unstable_iterative_stable(tmp_path, rotor_fmus):
     assert energy[-fifth:].max() <= energy[:fifth].max() * 1.001
 
 
-def test_port_power_mismatch_in_sidecar(tmp_path, rotor_fmus):
+def test_port_power_mismatch_in_sidecar(tmp_path, fmu_dir):
     """The port r2.flange_tau -> r1.flange_tau / r1.flange_w -> r2.flange_w is found; its energy
     mismatch shrinks with the coupling error (Jacobi is first order: it at least about halves
     with the step) and almost vanishes when the interface converges (measured 2e-15 J)."""
     mismatch = []
     for h in STEPS[:2]:
-        result = run(tmp_path, rotor_fmus, {"algorithm": "jacobi", "step": h})
+        result = run(tmp_path, fmu_dir, {"algorithm": "jacobi", "step": h})
         port, = result.coupling_error["ports"]
         assert (port["driver"], port["receiver"]) == ("r2", "r1")
         mismatch.append(abs(port["mismatch_J"]))
@@ -238,12 +233,12 @@ def test_port_power_mismatch_in_sidecar(tmp_path, rotor_fmus):
     sidecar = json.loads(result.sidecar.read_text())
     assert sidecar["coupling_error"]["ports"][0]["mismatch_J"] == port["mismatch_J"]
     assert sidecar["statistics"]["r1"]["doStep_calls"] == 200
-    converged = run(tmp_path, rotor_fmus, {"algorithm": "iterative", "step": STEPS[0],
-                                           "tolerance": 1e-10})
+    converged = run(tmp_path, fmu_dir, {"algorithm": "iterative", "step": STEPS[0],
+                                        "tolerance": 1e-10})
     assert abs(converged.coupling_error["ports"][0]["mismatch_J"]) < 1e-3 * mismatch[0]
 
 
-def test_rollback_master_names_the_fmu_that_cannot(tmp_path, rotor_fmus, monkeypatch):
+def test_rollback_master_names_the_fmu_that_cannot(tmp_path, fmu_dir, monkeypatch):
     load = runner.load_fmus
 
     def without_rollback(scene, fmu_dir, log):
@@ -252,15 +247,15 @@ def test_rollback_master_names_the_fmu_that_cannot(tmp_path, rotor_fmus, monkeyp
         return fmus
     monkeypatch.setattr(runner, "load_fmus", without_rollback)
     with pytest.raises(SceneError, match=r"r2 \(ShaftRotor.fmu\) has canGetAndSetFMUstate"):
-        run(tmp_path, rotor_fmus, {"algorithm": "iterative", "step": 1e-2})
+        run(tmp_path, fmu_dir, {"algorithm": "iterative", "step": 1e-2})
 
 
-def test_cli_run_prints_coupling_error(tmp_path, rotor_fmus, capsys):
+def test_cli_run_prints_coupling_error(tmp_path, fmu_dir, capsys):
     from crankfmu.cli import main
 
     path = scene_file(tmp_path, {"algorithm": "gauss-seidel", "step": 1e-2}, OSCILLATOR, 0.2,
                       None)
-    code = main(["run", str(path), "--fmus", str(rotor_fmus), "--out", str(tmp_path / "o"),
+    code = main(["run", str(path), "--fmus", str(fmu_dir), "--out", str(tmp_path / "o"),
                  "--algorithm", "adaptive", "--extrapolation", "1", "--tolerance", "1e-3",
                  "--no-progress"])
     out = capsys.readouterr().out

@@ -126,8 +126,8 @@ def test_eq28_both_conventions_against_an_independent_minimum():
     independent = {"paper": press.p.J1 + float(np.mean(J2O)), "mean": float(np.mean(J))}
     for name, J_M0 in independent.items():
         assert conv[name]["J_M0"] == pytest.approx(J_M0, rel=1e-8)
-        res = minimize_scalar(lambda x: pa.flywheel_ratio(x, conv["omega0"], conv["J_D"], J_M0,
-                                                          conv["s"]),
+        res = minimize_scalar(lambda x, J_M0=J_M0: pa.flywheel_ratio(x, conv["omega0"],
+                                                                     conv["J_D"], J_M0, conv["s"]),
                               bounds=(0.0, 50.0), method="bounded",
                               options={"xatol": 1e-12})
         assert conv[name]["J_Mx"] == pytest.approx(res.x, rel=1e-6)

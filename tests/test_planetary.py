@@ -597,5 +597,5 @@ def test_exponential_integrals_against_quadrature(rate_span):
     assert E2 == pytest.approx(integral(lambda s: E1_of(rate, s)), rel=1e-13)
     assert J1 == pytest.approx(integral(lambda s: s * math.exp(-rate * s)), rel=1e-13)
     for o in (0.0, other):
-        expected = integral(lambda s: math.exp(-rate * s) * E1_of(o, s))
+        expected = integral(lambda s, o=o: math.exp(-rate * s) * E1_of(o, s))
         assert decay_product(rate, o, span, E1, J1) == pytest.approx(expected, rel=1e-13)

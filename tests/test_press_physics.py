@@ -511,7 +511,7 @@ def test_counterweight_25_is_a_negative_maximum():
         assert sp.m2 == pytest.approx(m2, rel=1e-12) and sp.d1 == 0.0
         assert sp.kind == "maximum" and sp.d2 < 0.0
 
-        def f(J2O):
+        def f(J2O, theta=theta):
             return pa.transmission_moment_ratio(W, J_D, J_D + J1 + J2O, s, theta)
         x, h = sp.J_2O, 1e-3 * (J_D + J1)
         assert f(x) == pytest.approx(sp.value, rel=1e-12)

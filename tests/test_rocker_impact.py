@@ -102,7 +102,8 @@ def reference(data: RockerData, *, c=None, c0=None, hertz=False, tau=0.0, q0=Non
     t, impacts, start = 0.0, [], (0.0 if touching else None)
     scale = np.r_[np.full(nq, 1e-3), np.full(nq, 10.0), 1e-3, 100.0, 100.0]
     while t < t_end:
-        ev = lambda s, yy, _touching: G @ yy[:nq] - yy[2 * nq] - gap
+        def ev(s, yy, _touching):
+            return G @ yy[:nq] - yy[2 * nq] - gap
         ev.terminal, ev.direction = True, (-1 if touching else 1)
         sol = solve_ivp(rhs, (t, t_end), y, method="DOP853", rtol=1e-12, atol=1e-14 * scale,
                         events=ev, args=(touching,), dense_output=True)
@@ -113,7 +114,7 @@ def reference(data: RockerData, *, c=None, c0=None, hertz=False, tau=0.0, q0=Non
             Ps = np.array([max(force(G @ yy[:nq] - yy[2 * nq] - gap), 0.0) for yy in Ys.T])
             Ts = np.array([support(yy, True) for yy in Ys.T])
 
-            def peak(fun, k):
+            def peak(fun, k, ts=ts, sol=sol):
                 lo, hi = ts[max(k - 1, 0)], ts[min(k + 1, len(ts) - 1)]
                 res = minimize_scalar(lambda s: -fun(sol.sol(s)), bounds=(lo, hi),
                                       method="bounded", options={"xatol": 1e-16})
@@ -217,7 +218,8 @@ def test_mo100_table_three_ways(table, f, k_n):
 def test_paper_claims(table):
     """Which of the paper's statements hold for MO-100, for each reading of 'S 10 % off'."""
     rows = list(table.values())
-    by = lambda f: [table[(f, k)] for k in K_N_VALUES]
+    def by(f):
+        return [table[(f, k)] for k in K_N_VALUES]
     # "Pm about 1 MN": 0.905 MN (S = 1.1) and 1.031 MN (S = 0.9); within 10 %.
     assert all(0.9e6 < r.Pm < 1.1e6 for r in rows)
     # "Tm about 17-18 % of Pm": measured 16.87 ... 18.13 %; it holds to +-0.2 points (three of

@@ -87,7 +87,7 @@ def test_phi_functions(z):
     (the series and the recurrence meet at |z| = 2: both sides are checked)."""
     from scipy.integrate import quad
     for k, value in enumerate(phi_functions(z, 4), start=1):
-        exact = quad(lambda s: math.exp((1 - s) * z) * s ** (k - 1) / math.factorial(k - 1),
+        exact = quad(lambda s, k=k: math.exp((1 - s) * z) * s ** (k - 1) / math.factorial(k - 1),
                      0.0, 1.0, epsabs=0, epsrel=1e-13, limit=200)[0]
         assert value == pytest.approx(exact, rel=1e-12)
 

@@ -45,11 +45,6 @@ def fork_server():
 
 
 @pytest.fixture(scope="module")
-def rotor_fmu_dir(fmu_dir):
-    return fmu_dir  # the session's catalog (tests/conftest.py)
-
-
-@pytest.fixture(scope="module")
 def one_worker():
     """The executor `jobs=1` makes (every run in this process), kept for the module."""
     from crankfmu.studies.executor import InProcessExecutor, make_executor
@@ -177,26 +172,26 @@ def test_failed_run_is_a_row_and_the_sweep_resumes(tmp_path, fmu_dir, one_worker
         sweep(ROOT / "scenarios/servo_press.toml", ["press.l=0.25,0.3"], out, **kw)
 
 
-def test_resume_after_interruption(tmp_path, rotor_fmu_dir, one_worker):
+def test_resume_after_interruption(tmp_path, fmu_dir, one_worker):
     """Rows already in sweep.csv (an interrupted sweep) are kept; only the others run."""
     scene = spinner(tmp_path)
     out = tmp_path / "s"
-    full = sweep(scene, VARY, out, executor=one_worker, fmu_dir=rotor_fmu_dir, progress=False,
+    full = sweep(scene, VARY, out, executor=one_worker, fmu_dir=fmu_dir, progress=False,
                  plot=False)
     lines = (out / "sweep.csv").read_text().splitlines()
     (out / "sweep.csv").write_text("\n".join(lines[:6]) + "\n" + lines[6][:10])  # 5 rows + a cut one
-    resumed = sweep(scene, VARY, out, executor=one_worker, fmu_dir=rotor_fmu_dir,
+    resumed = sweep(scene, VARY, out, executor=one_worker, fmu_dir=fmu_dir,
                     progress=False, plot=False)
     assert resumed.executed == 7
     same_table(full, resumed)
 
 @pytest.fixture(scope="module")
-def serial_run(tmp_path_factory, rotor_fmu_dir, one_worker):
+def serial_run(tmp_path_factory, fmu_dir, one_worker):
     """(scene, table): the 12 runs of 1 s in one worker, the table every other way of running
     them must give."""
     tmp = tmp_path_factory.mktemp("serial")
     scene = spinner(tmp)
-    return scene, sweep(scene, VARY, tmp / "out", executor=one_worker, fmu_dir=rotor_fmu_dir,
+    return scene, sweep(scene, VARY, tmp / "out", executor=one_worker, fmu_dir=fmu_dir,
                         progress=False)
 
 
@@ -205,8 +200,8 @@ def serial_table(serial_run):
     return serial_run[1]
 
 
-def test_local_pool_equals_serial(tmp_path, rotor_fmu_dir, serial_table):
-    table = sweep(spinner(tmp_path), VARY, tmp_path / "out", jobs=2, fmu_dir=rotor_fmu_dir,
+def test_local_pool_equals_serial(tmp_path, fmu_dir, serial_table):
+    table = sweep(spinner(tmp_path), VARY, tmp_path / "out", jobs=2, fmu_dir=fmu_dir,
                   progress=False, plot=False)
     same_table(serial_table, table)
 
@@ -233,7 +228,7 @@ def _kill_when_rows(csv: Path, pick_pid, rows: int = 2, timeout: float = 120.0) 
 
 # The killed-worker tests kill a worker when the first row is written (polled every 20 ms): the
 # other 11 runs of 1 s (about 0.1 s of CPU each) are still to do then.
-def test_killed_local_worker_loses_nothing(tmp_path, rotor_fmu_dir, serial_run):
+def test_killed_local_worker_loses_nothing(tmp_path, fmu_dir, serial_run):
     """SIGKILL of one pool worker mid-sweep (after the first row): the pool is restarted, the
     runs it lost run again, every row is there and equals the serial table."""
     scene, serial = serial_run
@@ -245,7 +240,7 @@ def test_killed_local_worker_loses_nothing(tmp_path, rotor_fmu_dir, serial_run):
                 and p.pid not in others]
         return kids[0].pid if kids else None
     info = _kill_when_rows(tmp_path / "pool" / "sweep.csv", a_worker, rows=1)
-    table = sweep(scene, VARY, tmp_path / "pool", jobs=2, fmu_dir=rotor_fmu_dir,
+    table = sweep(scene, VARY, tmp_path / "pool", jobs=2, fmu_dir=fmu_dir,
                   progress=False, plot=False)
     info["thread"].join(1)
     assert "killed" in info
@@ -272,7 +267,7 @@ def _session_processes(sid: int) -> list[tuple[int, str]]:
 
 @pytest.mark.skipif(not Path("/proc/self/stat").is_file(), reason="reads /proc (Linux)")
 @pytest.mark.parametrize("start_method", ["fork", "forkserver", "spawn"])
-def test_kill_9_of_a_sweep_leaves_no_process_and_no_temporary_folder(tmp_path, rotor_fmu_dir,
+def test_kill_9_of_a_sweep_leaves_no_process_and_no_temporary_folder(tmp_path, fmu_dir,
                                                                      start_method, short_tmp):
     """Issue #27. Before: after `kill -9` of `crankfmu sweep --jobs 2`, its 2 workers waited on
     their task queue for good, and with them multiprocessing's resource tracker (one set was
@@ -286,7 +281,7 @@ def test_kill_9_of_a_sweep_leaves_no_process_and_no_temporary_folder(tmp_path, r
     scene = spinner(tmp_path, stop=200.0)  # runs of seconds: the sweep is killed mid-run
     before, left, tmp = kill_9_mid_run(
         ["sweep", str(scene), *(f"--vary={v}" for v in VARY), "--jobs", "2", "--fmus",
-         str(rotor_fmu_dir), "--out", str(tmp_path / "out"), "--no-progress"],
+         str(fmu_dir), "--out", str(tmp_path / "out"), "--no-progress"],
         short_tmp, start_method, workers=2)
     print(f"\nkilled the sweep; its session held {len(before)} processes: {before}")
     assert left == [], left
@@ -412,22 +407,22 @@ def _tasks(tmp_path, victim):
             for k in range(4)]
 
 
-def test_a_run_that_always_kills_its_local_worker_is_a_lost_row(tmp_path, rotor_fmu_dir):
+def test_a_run_that_always_kills_its_local_worker_is_a_lost_row(tmp_path, fmu_dir):
     """The pool is restarted after each break and the lost runs run again one at a time; the
     run that kills its worker alone is returned as lost with the reason, every other run
     completes."""
     from crankfmu.studies.executor import LocalPoolExecutor
     with LocalPoolExecutor(2) as pool:
-        outputs = pool.run(_tasks(tmp_path, victim=2), rotor_fmu_dir, progress=False)
+        outputs = pool.run(_tasks(tmp_path, victim=2), fmu_dir, progress=False)
     assert [o.status for o in outputs] == ["completed", "completed", "lost", "completed"]
     assert "a worker process died while this run was in flight (2 times, the last time alone)" \
         in outputs[2].reason
 
 
-def test_latin_hypercube_sweep(tmp_path, rotor_fmu_dir, one_worker):
+def test_latin_hypercube_sweep(tmp_path, fmu_dir, one_worker):
     """--samples: N points, one per stratum of each range, the same on a second call (resumed)."""
     scene = spinner(tmp_path)
-    kw = dict(samples=5, seed=1, executor=one_worker, fmu_dir=rotor_fmu_dir, progress=False,
+    kw = dict(samples=5, seed=1, executor=one_worker, fmu_dir=fmu_dir, progress=False,
               plot=False)
     table = sweep(scene, ["r.J=0.3:0.9", "r.d=0.2,1.0"], tmp_path / "lhs", **kw)
     assert len(table) == 5 and all(r["status"] == "completed" for r in table.rows)
@@ -459,13 +454,13 @@ def cluster():
                 yield client
 
 
-def test_dask_cluster_equals_serial(tmp_path, rotor_fmu_dir, serial_table, cluster):
+def test_dask_cluster_equals_serial(tmp_path, fmu_dir, serial_table, cluster):
     """A LocalCluster of 2 worker processes on 127.0.0.1 gives the --jobs 1 table exactly, and
     both workers took runs (they get the FMUs' bytes, not a path)."""
     assert all(r["status"] == "completed" for r in serial_table.rows)
     assert len(serial_table.rows) == 12
     table = sweep(spinner(tmp_path), VARY, tmp_path / "out", client=cluster,
-                  fmu_dir=rotor_fmu_dir, progress=False, plot=False)
+                  fmu_dir=fmu_dir, progress=False, plot=False)
     same_table(serial_table, table)  # the plot of a cluster's sweep: the CLI test below
 
 
@@ -506,13 +501,13 @@ def test_accuracy_and_compare_on_a_dask_cluster_equal_serial(fmu_dir, tmp_path, 
         (tmp_path / "cmp_dask" / "compare.csv").read_bytes()
 
 
-def test_killed_dask_worker_loses_nothing(tmp_path, rotor_fmu_dir, cluster, serial_run):
+def test_killed_dask_worker_loses_nothing(tmp_path, fmu_dir, cluster, serial_run):
     """SIGKILL of one Dask worker process mid-sweep: the nanny restarts it, the scheduler
     reschedules its run; every row is there, equal to the serial table."""
     scene, serial = serial_run
     pids = list(cluster.run(os.getpid).values())
     info = _kill_when_rows(tmp_path / "dask" / "sweep.csv", lambda: pids[0], rows=1)
-    table = sweep(scene, VARY, tmp_path / "dask", client=cluster, fmu_dir=rotor_fmu_dir,
+    table = sweep(scene, VARY, tmp_path / "dask", client=cluster, fmu_dir=fmu_dir,
                   progress=False, plot=False)
     info["thread"].join(1)
     assert info.get("killed") == pids[0]
@@ -520,7 +515,7 @@ def test_killed_dask_worker_loses_nothing(tmp_path, rotor_fmu_dir, cluster, seri
     same_table(serial, table)
 
 
-def test_cli_on_a_scheduler_address(tmp_path, rotor_fmu_dir, cluster, one_worker, capsys):
+def test_cli_on_a_scheduler_address(tmp_path, fmu_dir, cluster, one_worker, capsys):
     """`crankfmu sweep --scheduler tcp://127.0.0.1:PORT` (the address, not a client object):
     the serial table, and its plot."""
     from crankfmu.cli import main
@@ -529,21 +524,21 @@ def test_cli_on_a_scheduler_address(tmp_path, rotor_fmu_dir, cluster, one_worker
     out = tmp_path / "cli"
     assert main(["sweep", str(scene), "--vary", "r.J=0.3,0.6", "--vary", "r.d=0.2:1.0:2",
                  "--out", str(out), "--scheduler", cluster.scheduler.address,
-                 "--fmus", str(rotor_fmu_dir), "--no-progress", "--plot"]) == 0
+                 "--fmus", str(fmu_dir), "--no-progress", "--plot"]) == 0
     assert "4 runs (4 executed now, 0 kept" in capsys.readouterr().out
     serial = sweep(scene, ["r.J=0.3,0.6", "r.d=0.2:1.0:2"], tmp_path / "serial",
-                   executor=one_worker, fmu_dir=rotor_fmu_dir, progress=False, plot=False)
+                   executor=one_worker, fmu_dir=fmu_dir, progress=False, plot=False)
     header, rows = read_table(out / "sweep.csv")
     assert header == serial.columns
     same_rows(header, rows, serial.rows)
     assert (out / "sweep.png").is_file()
 
 
-def test_a_run_that_always_kills_its_dask_worker_is_a_lost_row(tmp_path, rotor_fmu_dir, cluster):
+def test_a_run_that_always_kills_its_dask_worker_is_a_lost_row(tmp_path, fmu_dir, cluster):
     """Dask reschedules it (allowed-failures, 1 in this cluster), then gives up: KilledWorker,
     reported as a lost row; the other runs complete."""
     from crankfmu.studies.executor import DaskExecutor
-    outputs = DaskExecutor(client=cluster).run(_tasks(tmp_path, victim=1), rotor_fmu_dir,
+    outputs = DaskExecutor(client=cluster).run(_tasks(tmp_path, victim=1), fmu_dir,
                                                progress=False)
     assert [o.status for o in outputs] == ["completed", "lost", "completed", "completed"]
     assert "KilledWorker" in outputs[1].reason or "died" in outputs[1].reason

@@ -23,35 +23,34 @@ from crankfmu.masters import taylor as taylor_module
 from crankfmu.masters.options import OptionError
 from crankfmu.system.load import load_scene
 from crankfmu.system.scene import SceneError
-from tests.test_masters import (OSCILLATOR, STEPS, orders, rotor_fmus, run,  # noqa: F401
-                                speed_error)
+from tests.test_masters import OSCILLATOR, STEPS, orders, run, speed_error
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.mark.parametrize("algorithm", ["jacobi", "gauss-seidel"])
 @pytest.mark.parametrize("q", [1, 2, 3, 4])
-def test_taylor_coupling_order_is_q_plus_one(tmp_path, rotor_fmus, algorithm, q):
+def test_taylor_coupling_order_is_q_plus_one(tmp_path, fmu_dir, algorithm, q):
     """Global order q + 1 (an input error O(h^(q+1)) per step): within +-0.3 of it, as the
     extrapolating masters' orders in test_masters.py (measured 1.99 to 5.00, module
     docstring). Errors at h = 2.5 ms stay above 1e-10, far above round-off."""
-    errors = [speed_error(run(tmp_path, rotor_fmus, {"algorithm": algorithm, "step": h,
-                                                     "taylor": q})) for h in STEPS]
+    errors = [speed_error(run(tmp_path, fmu_dir, {"algorithm": algorithm, "step": h,
+                                                  "taylor": q})) for h in STEPS]
     for order in orders(errors):
         assert abs(order - (q + 1)) < 0.3, (errors, orders(errors))
 
 
 @pytest.mark.parametrize("algorithm", ["jacobi", "gauss-seidel"])
-def test_taylor_polynomial_beats_extrapolation_of_the_same_order(tmp_path, rotor_fmus,
+def test_taylor_polynomial_beats_extrapolation_of_the_same_order(tmp_path, fmu_dir,
                                                                  algorithm):
     """A Taylor polynomial misses a signal by y''' h^3/3! at the step's end, the parabola
     through the last three points by y''' h^3: asymptotically 6x. Measured 8.9x (Jacobi) and
     7.7x (Gauss-Seidel) at h = 5 ms; at least 4x required."""
     h = STEPS[1]
-    extrapolated = speed_error(run(tmp_path, rotor_fmus, {"algorithm": algorithm, "step": h,
-                                                          "extrapolation": 2}))
-    taylor = speed_error(run(tmp_path, rotor_fmus, {"algorithm": algorithm, "step": h,
-                                                    "taylor": 2}))
+    extrapolated = speed_error(run(tmp_path, fmu_dir, {"algorithm": algorithm, "step": h,
+                                                       "extrapolation": 2}))
+    taylor = speed_error(run(tmp_path, fmu_dir, {"algorithm": algorithm, "step": h,
+                                                 "taylor": 2}))
     assert taylor * 4 < extrapolated, (taylor, extrapolated)
 
 
@@ -65,7 +64,7 @@ def monolithic_matrix(p: dict) -> np.ndarray:
                      [0, ds / J2, k / J2, -c2 / J2, -(ds + d2) / J2]])
 
 
-def test_exchange_rounds_give_the_monolithic_derivatives(tmp_path, rotor_fmus, monkeypatch):
+def test_exchange_rounds_give_the_monolithic_derivatives(tmp_path, fmu_dir, monkeypatch):
     """q rounds make every exchanged derivative that of the coupled system: at each point of a
     Gauss-Seidel run, the rows of r1.flange_w (= w1) and r2.flange_tau (= -(k theta +
     d_s (w1 - w2))) equal C A^k x, x the FMUs' state at that point (phi1, w1 from r1's outputs,
@@ -98,21 +97,21 @@ def test_exchange_rounds_give_the_monolithic_derivatives(tmp_path, rotor_fmus, m
         checked.append(t)
         return original(self, t)
     monkeypatch.setattr(taylor_module.TaylorCoupling, "rows_at", rows_at)
-    run(tmp_path, rotor_fmus, {"algorithm": "gauss-seidel", "step": 1e-2, "taylor": q},
+    run(tmp_path, fmu_dir, {"algorithm": "gauss-seidel", "step": 1e-2, "taylor": q},
         stop=0.2)
     assert len(checked) == 20
 
 
-def test_one_round_from_the_guess_as_accurate_as_q_rounds(tmp_path, rotor_fmus, monkeypatch):
+def test_one_round_from_the_guess_as_accurate_as_q_rounds(tmp_path, fmu_dir, monkeypatch):
     """The master refreshes its guess with one round (masters/taylor.py); q rounds at every
     point (forced here: the external inputs count as changed at every point) give the
     coupled derivatives exactly. The run's error agrees within 10 % (measured: 0.03 %, 0.08 %,
     0.24 % at taylor 2, 3, 4, h = 5 ms; taking the guess without the round, the run diverged)."""
     settings = {"algorithm": "gauss-seidel", "step": STEPS[1], "taylor": 3}
-    one_round = speed_error(run(tmp_path, rotor_fmus, settings))
+    one_round = speed_error(run(tmp_path, fmu_dir, settings))
     monkeypatch.setattr(taylor_module.TaylorCoupling, "_external_values",
                         lambda self, t: [object()])
-    exchanged = speed_error(run(tmp_path, rotor_fmus, settings))
+    exchanged = speed_error(run(tmp_path, fmu_dir, settings))
     assert abs(one_round - exchanged) < 0.1 * exchanged, (one_round, exchanged)
 
 

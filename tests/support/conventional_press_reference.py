@@ -109,7 +109,7 @@ def run(path, t_end: float, dt: float = 1e-3, rtol: float = 1e-11, table=None):
         if k in switches:
             model.command = float(switches[k])
         sample(k * dt, x)
-        x = model.advance(k * dt, x, dt, lambda s: model.inputs_at(s, x), rtol, atol)
+        x = model.advance(k * dt, x, dt, lambda s, x=x: model.inputs_at(s, x), rtol, atol)
     sample(n * dt, x)
     cols = ("time", "phi", "w_crank", "w_a", "w_b", "w_h", "M_C", "E_brake_b", "E_brake_h",
             "period", "motor_tau") + EVENT_TIMES

@@ -40,16 +40,10 @@ def unpacked_once(root: Path):
     return folder
 
 
-@pytest.fixture(scope="module")
-def catalog_fmus(fmu_dir) -> Path:
-    """Every FMU of the catalog: the session's (tests/conftest.py; import it into the module)."""
-    return fmu_dir
-
-
-@pytest.fixture(scope="module")
-def jacobi_scene():
+def servo_press_as_the_peers_run_it():
     """The servo press as the peers run it: Jacobi, inputs held over the step, the FMUs' default
-    tolerance (1e-8), stopped after IMPORTER_STOP."""
+    tolerance (1e-8), stopped after IMPORTER_STOP (the importer tests' jacobi_scene fixture,
+    tests/conftest.py)."""
     from crankfmu.system.load import load_scene
     scene = load_scene(Path(__file__).resolve().parents[2] / "scenarios" / "servo_press.toml")
     scene.stop_time = IMPORTER_STOP

@@ -163,7 +163,7 @@ def reference_run(scene: str, linear: bool, t_end: float, rtol=1e-12, atol=1e-12
         for k in ("b", "h"):
             if mode[k] == 0:
                 for sgn in (+1, -1):  # T_k reaches -sgn*C_k: breaks free in direction sgn
-                    def g(s, yy, k=k, sgn=sgn):
+                    def g(s, yy, k=k, sgn=sgn, mode=mode):
                         r = ne.solve(s, yy[0], yy[1], mode)
                         C = ne.capacities(s)[0 if k == "b" else 1]
                         return C + sgn * r[4 if k == "b" else 5]
@@ -177,8 +177,8 @@ def reference_run(scene: str, linear: bool, t_end: float, rtol=1e-12, atol=1e-12
                 funcs.append(g)
                 kinds.append(("zero", k, 0))
         t_stop = min([tk for tk in kinks if tk > t] + [t_end])
-        sol = solve_ivp(lambda s, yy: ne.rhs(s, yy, mode), (t, t_stop), y, method="DOP853",
-                        rtol=rtol, atol=atol, events=funcs)
+        sol = solve_ivp(lambda s, yy, mode=mode: ne.rhs(s, yy, mode), (t, t_stop), y,
+                        method="DOP853", rtol=rtol, atol=atol, events=funcs)
         assert sol.status >= 0, sol.message
         if sol.status == 0:
             t, y = t_stop, sol.y[:, -1]
@@ -313,8 +313,8 @@ def run_model(drive, torque, command: float, t_end: float, h: float, coupling: s
             M1 = M0 + slope * h
             for it in range(1, 31):
                 drive.set_discrete_state(saved_d)
-                u_of_t = (lambda s, t=t, M0=M0, M1=M1:
-                          inputs(s, M0 + (M1 - M0) * (s - t) / h))
+                def u_of_t(s, t=t, M0=M0, M1=M1):
+                    return inputs(s, M0 + (M1 - M0) * (s - t) / h)
                 x_new = drive.advance(t, saved_x.copy(), h, u_of_t, rtol, atol)
                 M1_new = torque(drive.sun_speed(x_new))
                 done = abs(M1_new - M1) <= 1e-11 * (1.0 + abs(M1))
