@@ -22,7 +22,6 @@ import json
 import sys
 from pathlib import Path
 
-
 from crankfmu.masters import traits
 from generated_page import write_generated  # scripts/, beside this file
 
