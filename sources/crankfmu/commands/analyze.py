@@ -156,8 +156,7 @@ def run_press(args) -> int:
 
     _positive(args.masses, "--masses", "kg")
     scene = load_scene(_scene_file(args.scene))
-    figures = ["press_dynamic_error.png", "press_base_link.png", "press_flywheel.png",
-               "press_base_link_mass.png"]
+    figures = [*papers.PRESS_FIGURES, "press_base_link_mass.png"]
     out = _out_dir(args.out, "press",
                    ["press_flywheel_28.csv", "press_base_link_mass.csv"] + figures * args.plot)
     press, m_static, _, u0 = papers.press_models(scene)

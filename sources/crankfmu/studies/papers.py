@@ -467,14 +467,18 @@ def figure_flywheel(d: dict):
     return fig
 
 
+# the files press_figures writes, in its order (`crankfmu analyze press` checks them first)
+PRESS_FIGURES = ("press_dynamic_error.png", "press_base_link.png", "press_flywheel.png")
+
+
 def press_figures(scene, out_dir: Path) -> list[Path]:
     press, m_static, m_lag, u0 = press_models(scene)
     progress("analyze press: the figures of the dynamic errors, the base-link offset, the "
              "flywheel")
-    drawn = {"press_dynamic_error.png": lambda: figure_dynamic_error(
-                 dynamic_error_data(press, m_static, m_lag, u0)),
-             "press_base_link.png": lambda: figure_base_link(base_link_data(press)),
-             "press_flywheel.png": lambda: figure_flywheel(flywheel_data(press, m_static, u0))}
+    drawn = dict(zip(PRESS_FIGURES, (
+        lambda: figure_dynamic_error(dynamic_error_data(press, m_static, m_lag, u0)),
+        lambda: figure_base_link(base_link_data(press)),
+        lambda: figure_flywheel(flywheel_data(press, m_static, u0)))))
     figures = {name: draw() for name, draw in progress_over(drawn.items(), "analyze press",
                                                              "figure")}
     return save_figures(figures, out_dir)
