@@ -14,9 +14,9 @@ test's folder, never at real /dev files.
 from __future__ import annotations
 
 import fcntl
-import math
 import hashlib
 import json
+import math
 import os
 import subprocess
 import sys
