@@ -38,6 +38,7 @@ runpy.run_module("crankfmu", run_name="__main__", alter_sys=True)
 """
 
 PHASES = ("imports", "run", "shutdown")
+STOP_TIMES = {"imports": 0.02, "run": 1000.0, "shutdown": 0.02}  # s: each phase's scene
 
 
 def rotor(stop: float) -> str:
@@ -84,23 +85,32 @@ def trial(planned: tuple[str, str, float], work: Path, fmu_dir: Path, cwd: Path)
     _, stderr = proc.communicate(timeout=120)
     stderr = stderr.decode(errors="replace")
     clean = proc.returncode == 130 and "interrupted" in stderr and "Traceback" not in stderr \
-        and "Exception ignored" not in stderr and _written_is_whole(out / "rotor.csv", phase)
+        and "Exception ignored" not in stderr and _written_is_whole(out / "rotor.csv", phase,
+                                                                    stderr)
     return {"phase": phase, "delay": delay, "status": proc.returncode, "stderr": stderr,
             "clean": clean}
 
 
-def _written_is_whole(csv: Path, phase: str) -> bool:
+def _written_is_whole(csv: Path, phase: str, stderr: str) -> bool:
     """No CSV (interrupted before anything was written), or a whole one whose sidecar counts
-    its rows and says how the run ended: completed when the Ctrl-C came in the exit handlers,
-    else interrupted (a Ctrl-C meant for the imports that comes once the run has begun, the
-    imports having taken less than its delay, interrupts the run: 0.18 s did in 2026-11-26's
-    20 trials of seed 27, once the imports took less)."""
+    its rows and says how the run ended, as it did: completed (the CSV reaches the scene's stop
+    time) or interrupted (it does not). Where the Ctrl-C landed decides which, not the phase it
+    was meant for: a Ctrl-C meant for the imports lands in the run, or after it once crankfmu
+    starts and runs the 0.02 s scene in less than its delay (0.18 s in trial 7 of seed 27: it
+    interrupted the run on 2026-11-26, it came after the results on 2026-11-27). One in the
+    exit handlers (the phase "shutdown", or any that stderr reports there) finds the run
+    completed."""
+    finished = "the command had finished" in stderr  # __main__._exit: in the exit handlers
+    if phase == "shutdown" and not finished:
+        return False
     if not csv.is_file():
-        return True
+        return not finished
     rows = np.loadtxt(csv, delimiter=",", skiprows=1, ndmin=2)
     meta = json.loads(csv.with_suffix(".json").read_text())
+    reached_stop = len(rows) > 0 and abs(rows[-1, 0] - STOP_TIMES[phase]) <= 1e-12
+    outcome = "completed" if reached_stop else "interrupted"
     return bool(np.all(np.isfinite(rows))) and meta["csv"]["rows"] == len(rows) and \
-        meta["outcome"] == ("completed" if phase == "shutdown" else "interrupted")
+        meta["outcome"] == outcome and (outcome == "completed" or not finished)
 
 
 def campaign(n: int, seed: int, work: Path, fmu_dir: Path, cwd: Path,
@@ -112,7 +122,7 @@ def campaign(n: int, seed: int, work: Path, fmu_dir: Path, cwd: Path,
 
     rng = random.Random(seed)
     for phase in PHASES:  # written before the trials start: they share them
-        (work / f"ctrl_c_{phase}.toml").write_text(rotor(1000.0 if phase == "run" else 0.02))
+        (work / f"ctrl_c_{phase}.toml").write_text(rotor(STOP_TIMES[phase]))
     plans = [plan(PHASES[k % len(PHASES)], rng) for k in range(n)]
     with ThreadPoolExecutor(max(1, at_once)) as pool:
         return list(pool.map(lambda planned: trial(planned, work, fmu_dir, cwd), plans))
