@@ -316,21 +316,36 @@ SHARED = {"tests/test_papers_figures.py": "papers",   # tests/support/papers_dat
           "tests/test_papers_claims.py": "papers",
           "tests/test_adaptive_edges.py": "clutch_hammer",  # tests/support/clutch_reference.py
           "tests/test_clutch_hammer.py": "clutch_hammer"}
-# The longest units first (a file, or the files of a SHARED name): the short ones then fill the
-# end, and the two workers finish together. Seconds of wall time per unit in `python -m pytest`
-# (2026-11-26 16:36 UTC, a per-test plugin): fmi3 16.5, sweep 10.5, papers 9.9, large_steps 7.7,
-# runtime 6.8, fmu_build 4.2, runtime_scenes 6.0, press_physics 3.3, importer_c 5.0; every
-# other file under 5.5 s. The order is an earlier measurement's: with it the two workers ended
-# 0.5 s apart in that run.
-LONGEST_FIRST = ["tests/test_fmi3.py", "tests/test_sweep.py", "papers", "tests/test_large_steps.py",
-                 "tests/test_runtime.py", "tests/test_fmu_build.py", "tests/test_runtime_scenes.py",
-                 "tests/test_press_physics.py", "tests/test_importer_c.py"]
+# Seconds of wall time per unit (a file, named without tests/test_ and .py, or a SHARED name) in
+# `python -m pytest`, from a per-test plugin (2026-11-27, a fresh clone): the units go out
+# longest first, so that only short ones are left at the end and the two workers finish
+# together. Units not listed (under 0.5 s, or new) come after, the most tests first. (With nine
+# units listed and the rest by number of tests, files of 1-2 s ran last: the workers ended
+# 0.4-0.9 s apart.) Stale figures cost balance only.
+UNIT_SECONDS = {
+    "fmi3": 12.1, "papers": 9.5, "sweep": 9.2, "large_steps": 8.8, "api": 5.1,
+    "runtime_scenes": 5.1, "fmu_build": 5.1, "importer_ecos": 5.0, "importer_c": 4.4,
+    "runtime": 3.9, "executor": 3.7, "press_physics": 3.4, "outputs": 3.0, "error_estimate": 2.8,
+    "hostile_input": 2.6, "fmu_cache": 2.5, "planetary": 2.5, "accuracy_events": 2.5,
+    "companions": 2.0, "launcher": 1.9, "mixing": 1.9, "ctrl_c": 1.9, "masters": 1.8, "cli": 1.7,
+    "taylor_coupling": 1.6, "fuzz_quick": 1.5, "clutch_mill_stand": 1.5, "rocker_impact": 1.4,
+    "mill_stand_scenes": 1.4, "clutch_hammer": 1.4, "hammer": 1.2, "exit_crash": 1.1,
+    "adding_a_model": 1.0, "cli_options": 1.0, "planetary_scenes": 1.0, "effects_off": 1.0,
+    "accuracy": 1.0, "fixed_step_edges": 0.9, "importer_fmpy": 0.8, "reference_hybrid": 0.8,
+    "ssp": 0.8, "importer_libcosim": 0.8, "matrix_exponential": 0.8, "servo_press_scene": 0.8,
+    "layers": 0.7, "speed_loop": 0.6, "dead_centre": 0.6, "reference": 0.6, "compare": 0.6,
+    "master_contract": 0.5, "conventional_press": 0.5}
+
+
+def unit_seconds(unit: str) -> float:
+    """UNIT_SECONDS of a unit (a test file's path or a SHARED name); 0 for one not listed."""
+    return UNIT_SECONDS.get(unit.removeprefix("tests/test_").removesuffix(".py"), 0.0)
 
 
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config, log):
     """--dist loadfile (pyproject.toml) with the files of a SHARED name as one unit, and the
-    units in the order of LONGEST_FIRST, then by number of tests (xdist's own order). (The
+    units longest first (UNIT_SECONDS), then by number of tests (xdist's own order). (The
     xdist_group marks of --dist loadgroup are lost with pytest 9.2 and pytest-xdist 3.8: the
     worker renames item._nodeid, which pytest 9 no longer reads.)"""
     if config.getvalue("dist") != "loadfile":
@@ -346,10 +361,9 @@ def pytest_xdist_make_scheduler(config, log):
 
         def _assign_work_unit(self, node) -> None:
             if not self.ordered:  # the queue is complete before the first unit is assigned
-                rank = {unit: k for k, unit in enumerate(LONGEST_FIRST)}
                 self.workqueue = type(self.workqueue)(sorted(
                     self.workqueue.items(),
-                    key=lambda unit: (rank.get(unit[0], len(rank)), -len(unit[1]))))
+                    key=lambda unit: (-unit_seconds(unit[0]), -len(unit[1]))))
                 self.ordered = True
             super()._assign_work_unit(node)
 

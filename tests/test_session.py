@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import pytest
 
-from tests.conftest import _my_share, rewritten_pyc
+from tests.conftest import ROOT, SHARED, UNIT_SECONDS, _my_share, rewritten_pyc, unit_seconds
 
 
 def test_each_worker_finds_its_share_of_the_test_files_rewritten(request):
@@ -23,3 +23,13 @@ def test_each_worker_finds_its_share_of_the_test_files_rewritten(request):
     stale = [source.name for source in share if rewrite._read_pyc(source, rewritten_pyc(source))
              is None]
     assert stale == [], f"not rewritten before collection: {stale}"
+
+
+def test_every_unit_the_schedule_times_exists():
+    """The workers take the units longest first by UNIT_SECONDS (conftest's scheduler): a name
+    there that is no test file and no SHARED unit (a file renamed) would lose its place."""
+    files = {f"tests/{p.name}" for p in (ROOT / "tests").glob("test_*.py")}
+    units = {SHARED.get(f, f) for f in files}
+    timed = {u for u in units if unit_seconds(u) > 0.0}
+    assert len(timed) == len(UNIT_SECONDS), sorted(
+        set(UNIT_SECONDS) - {u.removeprefix("tests/test_").removesuffix(".py") for u in units})
