@@ -321,7 +321,7 @@ SHARED = {"tests/test_papers_figures.py": "papers",   # tests/support/papers_dat
 # longest first, so that only short ones are left at the end and the two workers finish
 # together. Units not listed (under 0.5 s, or new) come after, the most tests first. (With nine
 # units listed and the rest by number of tests, files of 1-2 s ran last: the workers ended
-# 0.4-0.9 s apart.) Stale figures cost balance only.
+# 0.4-1.0 s apart.) Stale figures cost balance only.
 UNIT_SECONDS = {
     "fmi3": 12.1, "papers": 9.5, "sweep": 9.2, "large_steps": 8.8, "api": 5.1,
     "runtime_scenes": 5.1, "fmu_build": 5.1, "importer_ecos": 5.0, "importer_c": 4.4,
@@ -337,9 +337,15 @@ UNIT_SECONDS = {
     "master_contract": 0.5, "conventional_press": 0.5}
 
 
+def unit_name(unit: str) -> str:
+    """A unit's name in UNIT_SECONDS: a test file's path without tests/test_ and .py, or a
+    SHARED name as it is."""
+    return unit.removeprefix("tests/test_").removesuffix(".py")
+
+
 def unit_seconds(unit: str) -> float:
     """UNIT_SECONDS of a unit (a test file's path or a SHARED name); 0 for one not listed."""
-    return UNIT_SECONDS.get(unit.removeprefix("tests/test_").removesuffix(".py"), 0.0)
+    return UNIT_SECONDS.get(unit_name(unit), 0.0)
 
 
 @pytest.hookimpl(optionalhook=True)
