@@ -467,20 +467,23 @@ def figure_flywheel(d: dict):
     return fig
 
 
-# the files press_figures writes, in its order (`crankfmu analyze press` checks them first)
-PRESS_FIGURES = ("press_dynamic_error.png", "press_base_link.png", "press_flywheel.png")
+# the files press_figures writes, each with its drawing from press_models' (press, motor
+# without its lag, motor with it, u0) (`crankfmu analyze press` checks the names first)
+PRESS_FIGURES = {
+    "press_dynamic_error.png": lambda press, m_static, m_lag, u0: figure_dynamic_error(
+        dynamic_error_data(press, m_static, m_lag, u0)),
+    "press_base_link.png": lambda press, m_static, m_lag, u0: figure_base_link(
+        base_link_data(press)),
+    "press_flywheel.png": lambda press, m_static, m_lag, u0: figure_flywheel(
+        flywheel_data(press, m_static, u0))}
 
 
 def press_figures(scene, out_dir: Path) -> list[Path]:
-    press, m_static, m_lag, u0 = press_models(scene)
+    models = press_models(scene)
     progress("analyze press: the figures of the dynamic errors, the base-link offset, the "
              "flywheel")
-    drawn = dict(zip(PRESS_FIGURES, (
-        lambda: figure_dynamic_error(dynamic_error_data(press, m_static, m_lag, u0)),
-        lambda: figure_base_link(base_link_data(press)),
-        lambda: figure_flywheel(flywheel_data(press, m_static, u0)))))
-    figures = {name: draw() for name, draw in progress_over(drawn.items(), "analyze press",
-                                                             "figure")}
+    figures = {name: draw(*models) for name, draw in progress_over(
+        PRESS_FIGURES.items(), "analyze press", "figure")}
     return save_figures(figures, out_dir)
 
 
