@@ -389,6 +389,25 @@ def test_model_exchange_master_refuses_an_fmi2_file(tmp_path, fmu_dir):
         crankfmu.simulate(path, algorithm="model-exchange")
 
 
+def test_the_fmi_version_follows_a_file_replaced_at_the_same_path(tmp_path, fmu_dir, fmi3_dir):
+    """is_fmi3 reads a file once per version of it (inode, size, modification time): an FMU
+    replaced at the same path, renamed over it as a build writes it or rewritten in place, is
+    read again, so the runner never opens a new file with the old file's FMI version."""
+    import os
+    import shutil
+
+    from crankfmu.fmu.instance3 import is_fmi3
+
+    path = tmp_path / "Motor.fmu"
+    shutil.copyfile(fmu_dir / "DcServoMotor.fmu", path)
+    assert not is_fmi3(path)
+    shutil.copyfile(fmi3_dir / "DcServoMotor.fmu", tmp_path / "part")
+    os.replace(tmp_path / "part", path)
+    assert is_fmi3(path)
+    path.write_bytes((fmu_dir / "DcServoMotor.fmu").read_bytes())  # in place: same inode
+    assert not is_fmi3(path)
+
+
 def test_an_fmi3_fmu_with_another_builds_token_is_refused_for_both_interfaces(fmi3_dir, tmp_path):
     """The instantiationToken is the FMI 3.0 GUID: a modelDescription of another build (here the
     token replaced, every other byte kept) is refused before anything is unpacked, for

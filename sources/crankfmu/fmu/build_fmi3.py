@@ -21,13 +21,12 @@ Co-Simulation takes any effects in any of them.
 from __future__ import annotations
 
 import functools
-import importlib
 from pathlib import Path
 
 from ..models.catalog import FMU_MODELS, physics_class
 from . import launcher
-from .build import (bundle_on_path, bundle_sources, host, library_binaries, model_card_html,
-                    pack, report, validate)
+from .build import (bundle_on_path, bundle_sources, host, instantiable_class, library_binaries,
+                    model_card_html, pack, report, validate)
 from .bundle import MARK, digest_of, render
 
 FMI3_DIR = "fmi3"  # under the FMU folder: fmus/fmi3/
@@ -115,8 +114,7 @@ def build_fmu3(model_name: str, dest: Path, effects=None) -> Path:
     rendered = render(marked, digest)
     entries = {f"resources/{name}": data for name, data in rendered.items()}
     with bundle_on_path(marked, digest) as (tmp, _, script):
-        slave_class = getattr(importlib.import_module(script.stem), model_name)
-        slave_class(instance_name="build", resources=str(tmp))  # the class must instantiate
+        slave_class = instantiable_class(script, model_name, tmp)
         entries["modelDescription.xml"] = model_description_fmi3(slave_class, digest, host())
     entries.update(library_binaries(3, model_name))
     card = model_card_html(model_name).replace("</body>", me_card_html(model_name, effects) +

@@ -10,6 +10,8 @@ arguments of fmi3EnterInitializationMode: `setup` keeps them and `slave` passes 
 from __future__ import annotations
 
 import ctypes
+import functools
+import os
 import time
 from pathlib import Path
 
@@ -24,7 +26,17 @@ CO_SIMULATION, MODEL_EXCHANGE = "CoSimulation", "ModelExchange"
 
 
 def is_fmi3(path: Path) -> bool:
-    """Does the FMU file declare fmiVersion 3.x?"""
+    """Does the FMU file declare fmiVersion 3.x? Read once per version of the file (its inode,
+    size and modification time): a run asks for each FMU when it checks the scene and again when
+    it opens it, a sweep or study for every run (1,289 calls, 111 reads over the test suite's
+    workers). A build renames a new file over the old (a new inode); only a rewrite in place to
+    the same size within one tick of the file system's clock would go unseen."""
+    status = os.stat(path)
+    return _declares_fmi3(os.fspath(path), (status.st_ino, status.st_size, status.st_mtime_ns))
+
+
+@functools.lru_cache(maxsize=256)
+def _declares_fmi3(path: str, identity: tuple[int, int, int]) -> bool:
     import zipfile
     with zipfile.ZipFile(path) as zf:
         head = zf.open("modelDescription.xml").read(4096)
