@@ -300,3 +300,21 @@ def test_the_csv_holds_the_recorded_doubles_exactly(tmp_path):
     assert [[math.copysign(1, v) for v in row] for row in read] == \
         [[math.copysign(1, v) for v in row] for row in rec.rows.tolist()]
     assert read == rec.rows.tolist() and lines[0] == "0.0,5e-324,-0.0"
+
+
+def test_an_analysis_table_is_written_whole_or_not_at_all(tmp_path):
+    """An analysis's CSV table (here the base-link mass sweep's) is written through a temporary
+    file renamed over the name: a failure while its rows are made leaves the earlier table
+    as it was and no temporary file. Before, the tables were truncated first and written in
+    place: the same failure left a header and one row where the earlier table had been."""
+    from crankfmu.studies import base_link
+
+    path = tmp_path / "press_base_link_mass.csv"
+    path.write_text("the earlier table\n")
+    broken = {case: {"mass": np.array([0.0, 20.0]), "delta_sim": np.zeros(2),
+                     "delta_1": np.zeros(2), "L1": np.zeros(1), "J0": np.zeros(2)}
+              for case in base_link.CASES}  # L1 one short: the second row fails
+    with pytest.raises(IndexError):
+        base_link.write_csv(broken, path)
+    assert path.read_text() == "the earlier table\n"
+    assert [p.name for p in tmp_path.iterdir()] == [path.name]

@@ -13,8 +13,9 @@ Every command that writes results takes one output folder (`--out DIR`; the Pyth
 
 `atomic_write` writes through a temporary file in the same folder and renames it over the name
 after checking the name again, so a reader sees the old file or the new one, never half of
-one, and nothing but a regular file is ever replaced. `open_regular` opens a file to be written
-in place (a table appended row by row) under the same rule. `folder_lock` holds an exclusive
+one, and nothing but a regular file is ever replaced; `write_table` writes a CSV table so.
+`open_regular` opens a file to be written in place (a table appended row by row) under the
+same rule. `folder_lock` holds an exclusive
 lock on the folder itself (flock on the folder: no lock file is left behind) while a set of
 files that belong together is written, so two processes writing the same names at once cannot
 interleave their sets.
@@ -142,6 +143,19 @@ def atomic_write(path, write, option: str = "--out") -> str:
             os.unlink(tmp)
         raise
     return sink.sha256.hexdigest()
+
+
+def write_table(path, header, rows, option: str = "--out") -> Path:
+    """A CSV table at `path`, written whole (atomic_write): the `header` row, then `rows`
+    (sequences; an empty one is a blank line, so a second header can start another block)."""
+    import csv
+
+    def write(f) -> None:
+        writer = csv.writer(f)
+        writer.writerow(header)
+        writer.writerows(rows)
+    atomic_write(path, write, option)
+    return Path(path)
 
 
 def _umask() -> int:

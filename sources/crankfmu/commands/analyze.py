@@ -119,7 +119,8 @@ def _out_dir(out: Path | None, name: str, files) -> Path:
     the analysis writes there checked before it computes anything (crankfmu.outputs: a folder
     that is a file or cannot be written, a name that exists as anything but a regular file, a
     FIFO, a symbolic link, a folder, is refused, exit 2). The tables are then written with
-    outputs.open_regular and the figures with cosim.results.save_figure: regular files only."""
+    outputs.write_table and the figures with cosim.results.save_figure: each a whole regular
+    file, renamed over the name."""
     from ..outputs import check_files
 
     folder = out or Path("results") / f"analyze-{name}"
@@ -360,13 +361,8 @@ def run_hammer(args) -> int:
 
 
 def _write_blows(rows: list[dict], path: Path) -> Path:
-    import csv
-
-    from ..outputs import open_regular
+    from ..outputs import write_table
     keys = (("run", ""), ("n", "1"), ("t", "s"), ("phi", "rad"), ("V_impact", "m/s"),
             ("P_peak", "N"), ("T_peak", "N"))
-    with open_regular(path) as f:
-        w = csv.writer(f)
-        w.writerow([f"{k} [{u}]" if u else k for k, u in keys])
-        w.writerows([r[k] for k, _ in keys] for r in rows)
-    return path
+    return write_table(path, [f"{k} [{u}]" if u else k for k, u in keys],
+                       ([r[k] for k, _ in keys] for r in rows))

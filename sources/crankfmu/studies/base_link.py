@@ -22,13 +22,12 @@ harmonic L_1 of the disturbance moment and the constant inertia J0.
 """
 from __future__ import annotations
 
-import csv
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from ..outputs import open_regular
+from ..outputs import write_table
 
 CASES = ("base link, gravity on", "base link, gravity off", "counterweight on the crank")
 DEFAULT_MASSES = tuple(float(m) for m in range(0, 401, 20))   # kg: the shipped 20 and 200 on it
@@ -154,15 +153,11 @@ def format_table(sweep: dict) -> str:
 
 
 def write_csv(sweep: dict, path: Path) -> Path:
-    with open_regular(path) as f:
-        w = csv.writer(f)
-        w.writerow(["case", "mass [kg]", "delta_sim [1]", "delta_1 [1]", "L_1 [N.m]",
-                    "J0 [kg.m2]"])
-        for c in CASES:
-            d = sweep[c]
-            for k in range(d["mass"].size):
-                w.writerow([c, d["mass"][k], d["delta_sim"][k], d["delta_1"][k], d["L1"][k],
-                            d["J0"][k]])
+    return write_table(path, ["case", "mass [kg]", "delta_sim [1]", "delta_1 [1]", "L_1 [N.m]",
+                              "J0 [kg.m2]"],
+                       ([c, sweep[c]["mass"][k], sweep[c]["delta_sim"][k], sweep[c]["delta_1"][k],
+                         sweep[c]["L1"][k], sweep[c]["J0"][k]]
+                        for c in CASES for k in range(sweep[c]["mass"].size)))
     return path
 
 

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..outputs import open_regular
+from ..outputs import write_table
 
 PARAMETER = "motor.J_flywheel"
 
@@ -150,12 +150,8 @@ def report(table_csv: Path, scene, out_dir: Path | None = None, plot: bool = Fal
 
 
 def _write_csv(path: Path, J, delta, a: dict) -> Path:
-    import csv
-    with open_regular(path) as f:
-        w = csv.writer(f)
-        w.writerow(["J_flywheel [kg.m2]", "delta sweep [1]", "delta_1 [1]", "sqrt(26) [1]"])
-        w.writerows(zip(J, delta, a["delta_1"], a["ratio_26"]))
-    return path
+    return write_table(path, ["J_flywheel [kg.m2]", "delta sweep [1]", "delta_1 [1]",
+                              "sqrt(26) [1]"], zip(J, delta, a["delta_1"], a["ratio_26"]))
 
 
 def _plot(path: Path, J, delta, a: dict, fine, af: dict, name: str) -> None:
@@ -190,13 +186,8 @@ def _plot(path: Path, J, delta, a: dict, fine, af: dict, name: str) -> None:
 
 def write_conventions(conv: dict, path: Path) -> Path:
     """`eq28_conventions` as CSV: one row per convention."""
-    import csv
-    with open_regular(path) as f:
-        w = csv.writer(f)
-        w.writerow(["convention", "J_M0 [kg.m2]", "J_Mx at the crank [kg.m2]",
-                    "J_Mx on the motor shaft [kg.m2]", "relative to the paper's [1]"])
-        for c in ("paper", "mean"):
-            d = conv[c]
-            w.writerow([c, d["J_M0"], d["J_Mx"], d["J_Mx_motor"],
-                        d["J_Mx"] / conv["paper"]["J_Mx"] - 1.0])
-    return path
+    return write_table(path, ["convention", "J_M0 [kg.m2]", "J_Mx at the crank [kg.m2]",
+                              "J_Mx on the motor shaft [kg.m2]", "relative to the paper's [1]"],
+                       ([c, conv[c]["J_M0"], conv[c]["J_Mx"], conv[c]["J_Mx_motor"],
+                         conv[c]["J_Mx"] / conv["paper"]["J_Mx"] - 1.0]
+                        for c in ("paper", "mean")))

@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..outputs import open_regular
+from ..outputs import write_table
 from ..system.scene import SceneError
 from .progress import progress, progress_over  # noqa: F401 - progress: the analyses' notes
 
@@ -945,12 +945,7 @@ def format_planetary(d: dict) -> str:
 
 def write_planetary_csv(d: dict, path: Path) -> Path:
     """Engagement time against alpha_b (closed form) and the brake torque for a given time."""
-    import csv
-    with open_regular(path) as f:
-        w = csv.writer(f)
-        w.writerow(["alpha_b [1/s]", "engagement time [s]"])
-        w.writerows(zip(d["alpha_grid"], d["t_lock_grid"]))
-        w.writerow([])
-        w.writerow(["engagement time [s]", "Mp_b needed [N.m]"])
-        w.writerows(zip(d["targets"], d["Mp_needed"]))
-    return path
+    return write_table(path, ["alpha_b [1/s]", "engagement time [s]"],
+                       [*zip(d["alpha_grid"], d["t_lock_grid"]), [],
+                        ["engagement time [s]", "Mp_b needed [N.m]"],
+                        *zip(d["targets"], d["Mp_needed"])])

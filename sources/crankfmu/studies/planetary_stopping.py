@@ -20,14 +20,13 @@ monolithic rigid reference).
 """
 from __future__ import annotations
 
-import csv
 import math
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import CrankfmuError
-from ..outputs import open_regular
+from ..outputs import write_table
 from ..system.scene import SceneError
 
 DEFAULT_ANGLES = tuple(float(a) for a in range(90, 361, 15))   # deg after TDC
@@ -160,12 +159,8 @@ UNITS = {"angle": "deg", "t_command": "s", "w_crank": "rad/s", "w_a": "rad/s", "
 
 
 def write_csv(sweep: dict, path: Path) -> Path:
-    with open_regular(path) as f:
-        w = csv.writer(f)
-        w.writerow([f"{k} [{u}]" for k, u in UNITS.items()])
-        for j in range(sweep["angle"].size):
-            w.writerow([sweep[k][j] for k in UNITS])
-    return path
+    return write_table(path, [f"{k} [{u}]" for k, u in UNITS.items()],
+                       ([sweep[k][j] for k in UNITS] for j in range(sweep["angle"].size)))
 
 
 def figure(sweep: dict, forging: tuple[float, float] | None = (150.0, 180.0)):

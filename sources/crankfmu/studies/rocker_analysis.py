@@ -42,7 +42,7 @@ from ..models.rocker_impact.rocker_linear import (ITERATION_RTOL, K_N_VALUES, S_
                                                   coefficients, exact_linear, extremum,
                                                   first_approximation, first_return_to_zero,
                                                   linearise, support_stiffness)
-from ..outputs import open_regular
+from ..outputs import write_table
 
 
 # -- second approximation -------------------------------------------------------------------
@@ -236,12 +236,8 @@ TABLE_UNITS = {"S_factor": "1", "k_n": "N(2/3)/m", "S": "m", "c": "N/m", "c0": "
 
 def write_impact_table(rows: Sequence[TableRow], path):
     """The table's rows as CSV, every field with its unit."""
-    import csv
-    with open_regular(path) as f:
-        w = csv.writer(f)
-        w.writerow([f"{k} [{u}]" for k, u in TABLE_UNITS.items()])
-        w.writerows([getattr(r, k) for k in TABLE_UNITS] for r in rows)
-    return path
+    return write_table(path, [f"{k} [{u}]" for k, u in TABLE_UNITS.items()],
+                       ([getattr(r, k) for k in TABLE_UNITS] for r in rows))
 
 
 # -- the paper's claims ------------------------------------------------------------------------
@@ -402,14 +398,9 @@ def format_hertz_peak_table(rows: Sequence[dict]) -> str:
 
 
 def write_hertz_peak_table(rows: Sequence[dict], path):
-    import csv
-    with open_regular(path) as f:
-        w = csv.writer(f)
-        w.writerow(["S_factor [1]", "k_n [N(2/3)/m]", "iteration", "c0 [N/m]", "T_peak [N]",
-                    "P_peak [N]", "impact_duration [s]"])
-        for r in rows:
-            for name in ("linear", "hertz_peak"):
-                x = r[name]
-                w.writerow([r["S_factor"], r["k_n"], name, x["c_support_used"], x["T_peak"],
-                            x["P_peak"], x["impact_duration"]])
+    return write_table(path, ["S_factor [1]", "k_n [N(2/3)/m]", "iteration", "c0 [N/m]",
+                              "T_peak [N]", "P_peak [N]", "impact_duration [s]"],
+                       ([r["S_factor"], r["k_n"], name, r[name]["c_support_used"],
+                         r[name]["T_peak"], r[name]["P_peak"], r[name]["impact_duration"]]
+                        for r in rows for name in ("linear", "hertz_peak")))
     return path

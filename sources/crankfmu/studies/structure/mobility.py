@@ -22,13 +22,12 @@ rank of the constraint Jacobian finds: docs/structure.md, section 4).
 """
 from __future__ import annotations
 
-import csv
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ...outputs import open_regular
+from ...outputs import write_table
 from .analysis import StructureResult
 from .description import Mechanism
 
@@ -162,15 +161,13 @@ def _count_lines(r: StructureResult) -> list:
 
 def write_csv(items, path: Path) -> Path:
     """One row per joint of each (mechanism, result): the table's columns, the pair class."""
-    with open_regular(path) as f:
-        w = csv.writer(f)
-        w.writerow(["mechanism", "joint", "pair", *COLUMNS, "other"])
-        for mech, result in items:
-            table = mobility_table(mech)
-            for j in mech.joints:
-                row = table["rows"][j.name]
-                w.writerow([mech.name, j.name, f"p{j.f}", *(row[c] for c in COLUMNS),
-                            row["other"]])
+    rows = []
+    for mech, result in items:
+        table = mobility_table(mech)
+        for j in mech.joints:
+            row = table["rows"][j.name]
+            rows.append([mech.name, j.name, f"p{j.f}", *(row[c] for c in COLUMNS), row["other"]])
+    return write_table(path, ["mechanism", "joint", "pair", *COLUMNS, "other"], rows)
     return path
 
 
