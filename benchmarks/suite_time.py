@@ -1,6 +1,7 @@
 """The test suite's wall time and CPU, this checkout against another commit or Python, alternated.
 
-    python benchmarks/suite_time.py [--against REV | --python PYTHON] [--repeat 3] [PYTEST ARGS]
+    python benchmarks/suite_time.py [--against REV | --python PYTHON] [--repeat 3] [--fresh]
+                                    [--idle SECONDS] [PYTEST ARGS]
 
 Runs `python -m pytest -q -p no:cacheprovider [PYTEST ARGS]` (the README's test command) in
 this checkout and, with --against, in a temporary git worktree of REV (removed at the end),
@@ -15,6 +16,13 @@ softirq from /proc/stat, in core-seconds: every process the suite starts, fork s
 children included, which `/usr/bin/time` misses; run it on an otherwise idle machine), then
 the medians and their ratio. Linux only (/proc/stat). Each checkout's first run may build its
 FMUs into its fmus/: a run before the measured ones warms both (--no-warm-up skips it).
+
+--fresh measures what CI and the README's test command run: a fresh clone. This checkout's
+runs are then made in a temporary clone of HEAD (its committed state), and before each run
+every checkout is cleaned of what is not in git (`git clean -xdf`: no fmus/, no bytecode) and
+given an empty user cache (XDG_CACHE_HOME); no warm-up. --idle SECONDS leaves the machine idle
+that long before each run (a run right after another may find a shared machine slower) and
+prints the load average each run starts at.
 """
 from __future__ import annotations
 
@@ -38,11 +46,11 @@ def busy_seconds() -> float:
     return (user + nice + system + irq + softirq) / os.sysconf("SC_CLK_TCK")
 
 
-def run_suite(checkout: Path, pytest_args: list[str], python: str = sys.executable
-              ) -> tuple[float, float, str]:
+def run_suite(checkout: Path, pytest_args: list[str], python: str = sys.executable,
+              env: dict[str, str] | None = None) -> tuple[float, float, str]:
     """(wall s, busy core-s, pytest's last line) of one run of the suite in `checkout` by the
-    interpreter `python`."""
-    env = {**os.environ, "PYTHONPATH": str(checkout / "sources")}
+    interpreter `python`, with `env` added to the environment."""
+    env = {**os.environ, "PYTHONPATH": str(checkout / "sources"), **(env or {})}
     busy, start = busy_seconds(), time.perf_counter()
     done = subprocess.run([python, "-m", "pytest", "-q", "-p", "no:cacheprovider",
                            *pytest_args], cwd=checkout, env=env, capture_output=True, text=True)
@@ -57,6 +65,12 @@ def main() -> int:
     parser.add_argument("--python", help="another interpreter to run this checkout's suite with")
     parser.add_argument("--repeat", type=int, default=3, help="measured runs per checkout")
     parser.add_argument("--no-warm-up", action="store_true", help="no unmeasured first run")
+    parser.add_argument("--fresh", action="store_true",
+                        help="each run from a fresh clone: this checkout's HEAD cloned, every "
+                             "checkout cleaned (git clean -xdf) and an empty user cache before "
+                             "each run")
+    parser.add_argument("--idle", type=float, default=0.0, metavar="SECONDS",
+                        help="wait this long, the machine idle, before each run")
     args, pytest_args = parser.parse_known_args()
     if args.against and args.python:
         parser.error("--against or --python, not both")
@@ -65,13 +79,18 @@ def main() -> int:
         python = shutil.which(args.python) or args.python
         if not Path(python).is_file():
             parser.error(f"--python: no interpreter at {args.python}")
-        if subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=ROOT,
-                          capture_output=True, text=True).stdout.strip():
+        if _uncommitted():
             print("note: the other interpreter runs HEAD, without this checkout's uncommitted "
                   "changes", flush=True)
+    if args.fresh and _uncommitted():
+        print("note: --fresh runs HEAD, without this checkout's uncommitted changes", flush=True)
     revision = args.against or ("HEAD" if args.python else None)
     with tempfile.TemporaryDirectory(prefix="suite_time_") as tmp:
         checkouts = {"this": (ROOT, sys.executable)}
+        if args.fresh:  # never clean this checkout itself: a clone of it is cleaned instead
+            clone = Path(tmp) / "this"
+            subprocess.run(["git", "clone", "-q", str(ROOT), str(clone)], check=True)
+            checkouts = {"this": (clone, sys.executable)}
         if revision:  # a checkout of its own: its fmus/ built by its interpreter
             other = Path(tmp) / "other"
             subprocess.run(["git", "worktree", "add", "--detach", "-q", str(other), revision],
@@ -86,16 +105,20 @@ def main() -> int:
 
 def _measure(checkouts: dict[str, tuple[Path, str]], args, pytest_args: list[str]) -> int:
     """Each named (checkout, interpreter) in turn, the last one named "this"."""
-    if not args.no_warm_up:
+    if not (args.no_warm_up or args.fresh):
         for name, (checkout, python) in checkouts.items():
             print(f"warm-up {name}: {run_suite(checkout, pytest_args, python)[2]}", flush=True)
     runs: dict[str, list[tuple[float, float]]] = {name: [] for name in checkouts}
     for _ in range(args.repeat):
         for name, (checkout, python) in checkouts.items():
-            wall, cpu, last = run_suite(checkout, pytest_args, python)
+            env = _fresh(checkout) if args.fresh else {}
+            time.sleep(args.idle)
+            load = os.getloadavg()[0]
+            wall, cpu, last = run_suite(checkout, pytest_args, python, env)
             runs[name].append((wall, cpu))
             print(f"{name:>12}: {wall:6.1f} s wall, {cpu:6.1f} core-s busy   "
-                  f"[{last}] {time.strftime('%H:%M:%S')}", flush=True)
+                  f"[{last}] {time.strftime('%H:%M:%S')}, load {load:.2f} at its start",
+                  flush=True)
     medians = {name: (statistics.median(w for w, _ in r), statistics.median(c for _, c in r))
                for name, r in runs.items()}
     for name, (wall, cpu) in medians.items():
@@ -104,6 +127,20 @@ def _measure(checkouts: dict[str, tuple[Path, str]], args, pytest_args: list[str
         (other, (w0, c0)), (_, (w1, c1)) = medians.items()
         print(f"ratio this / {other}: wall {w1 / w0:.3f}, busy {c1 / c0:.3f}")
     return 0
+
+
+def _uncommitted() -> bool:
+    return bool(subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
+                               cwd=ROOT, capture_output=True, text=True).stdout.strip())
+
+
+def _fresh(checkout: Path) -> dict[str, str]:
+    """Clean a temporary checkout as a fresh clone is (git clean -xdf); the environment of an
+    empty user cache (a new folder in the checkout: the next clean removes it)."""
+    subprocess.run(["git", "clean", "-q", "-xdf"], cwd=checkout, check=True)
+    cache = checkout / ".suite_time_cache"
+    cache.mkdir()
+    return {"XDG_CACHE_HOME": str(cache)}
 
 
 if __name__ == "__main__":
