@@ -117,7 +117,7 @@ def step_edges(system) -> list[float]:
     there: the new value holds from the edge on), sorted, without repeats. The masters write
     external inputs at a step's start and hold them over the step, so a step that crosses an
     edge shifts it to the step's end; a variable-step master ends its steps at these times."""
-    edges = set()
+    edges: set[float] = set()
     for signals in system.external.values():
         for _, s in signals:
             if s.interpolation == "step":

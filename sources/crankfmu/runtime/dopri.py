@@ -79,7 +79,8 @@ def _rms(values: Sequence[float]) -> float:
     return math.sqrt(sum(float(v) * float(v) for v in values) / len(values))
 
 
-def initial_step(f, t0: float, x0: Vector, f0: Vector, span: float, rtol: float, atol) -> float:
+def initial_step(f, t0: float, x0: Sequence[float], f0: Sequence[float], span: float,
+                 rtol: float, atol) -> float:
     """Hairer, Norsett & Wanner's starting step (Sec. II.4), as scipy's select_initial_step."""
     scale = [a + abs(v) * rtol for v, a in zip(x0, atol)]
     d0 = _rms([v / s for v, s in zip(x0, scale)])
@@ -103,15 +104,17 @@ class _Step:
     __slots__ = ("t0", "h", "x0", "stages", "q")
 
     def __init__(self, t0: float, h: float, x0: Vector, stages: list):
-        self.t0, self.h, self.x0, self.stages, self.q = t0, h, x0, stages, None
+        self.t0, self.h, self.x0, self.stages = t0, h, x0, stages
+        self.q: list | None = None
 
     def __call__(self, t: float) -> Vector:
-        if self.q is None:  # q[i][j] = sum_k K[k][i] P[k][j]
-            self.q = _dense_coefficients(len(self.x0))(self.stages)
+        q = self.q
+        if q is None:  # q[i][j] = sum_k K[k][i] P[k][j]
+            q = self.q = _dense_coefficients(len(self.x0))(self.stages)
         s = (t - self.t0) / self.h
         h = self.h
         return [x + h * s * (q0 + s * (q1 + s * (q2 + s * q3)))
-                for x, (q0, q1, q2, q3) in zip(self.x0, self.q)]
+                for x, (q0, q1, q2, q3) in zip(self.x0, q)]
 
 
 @functools.lru_cache(maxsize=None)
@@ -123,7 +126,7 @@ def _dense_coefficients(n: int):
         terms = [" + ".join(f"k[{m}][{i}] * {_P[m][j]!r}" for m in range(7) if _P[m][j])
                  for j in range(4)]
         rows.append("[" + ", ".join(terms) + "]")
-    namespace = {}
+    namespace: dict = {}
     exec(f"def coefficients(k):\n    return [{', '.join(rows)}]", namespace)  # noqa: S102
     return namespace["coefficients"]
 
@@ -198,7 +201,7 @@ def integrate(f: Callable[[float, Vector], Sequence[float]], t0: float, x0: Sequ
         calls += 1
     h_next = h
     g_old = [g(t, x) for g in events] if events else ()
-    crossings = []
+    crossings: list = []
     rejected = False
     while t < t_end:
         if h > max_step:
@@ -288,7 +291,9 @@ def _locate(events, g_old, g_new, t_old, t_new, step: _Step, crossings: list):
         elif b == 0.0:
             te = t_new
         else:
-            te = brentq(lambda s, g=g: g(s, step(s)), t_old, t_new, xtol=4 * EPS, rtol=4 * EPS)
+            def along(s: float, g=g) -> float:  # g along the step's dense output
+                return g(s, step(s))
+            te = brentq(along, t_old, t_new, xtol=4 * EPS, rtol=4 * EPS)
         roots.append((te, i))
     for te, i in sorted(roots):
         if getattr(events[i], "terminal", False):

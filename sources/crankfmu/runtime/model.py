@@ -90,6 +90,9 @@ from .dopri import Integration
 from .taylor import InputPolynomial
 
 InputFunction = Callable[[float], Sequence[float]]
+# The state and input vectors of the contract: lists of floats on the FMU's own path (cheaper
+# per step than numpy arrays), numpy arrays on scipy's
+Vector = Sequence[float] | np.ndarray
 # An FMU parameter of every crankfmu FMU that is not physics: integrate with scipy's solve_ivp
 SCIPY_SOLVER = "scipy_solver"
 # The runtime's Dormand-Prince 5(4) holds its local error to TOLERANCE_FACTOR x the requested
@@ -257,27 +260,27 @@ class PhysicsModel:
     def state_names(self) -> tuple[str, ...]:
         raise NotImplementedError
 
-    def initial_state(self, u: np.ndarray) -> np.ndarray:
+    def initial_state(self, u: Vector) -> Vector:
         raise NotImplementedError
 
-    def derivatives(self, t: float, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+    def derivatives(self, t: float, x: Vector, u: Vector) -> Vector:
         raise NotImplementedError
 
-    def output_values(self, t: float, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+    def output_values(self, t: float, x: Vector, u: Vector) -> Vector:
         raise NotImplementedError
 
-    def state_nominal(self) -> np.ndarray:
+    def state_nominal(self) -> Vector:
         """Typical magnitude of each state; the absolute tolerance is rtol * nominal."""
         return np.ones(len(self.state_names()))
 
-    def jacobian(self, t: float, x: np.ndarray, u: np.ndarray):
+    def jacobian(self, t: float, x: Vector, u: Vector):
         """d(derivatives)/dx for implicit solvers; None lets scipy use finite differences."""
         return None
 
     def event_functions(self, u_of_t: InputFunction) -> list:
         return []
 
-    def on_event(self, t: float, x: np.ndarray, u: np.ndarray, index: int) -> np.ndarray:
+    def on_event(self, t: float, x: Vector, u: Vector, index: int) -> Vector:
         return x
 
     def discrete_state(self) -> dict:
@@ -296,7 +299,7 @@ class PhysicsModel:
 
     # -- output derivatives (runtime/taylor.py) ---------------------------------------------
     def state_rows(self, t: float, x, u_rows: list, order: int, delta: float,
-                   known: list = ()) -> list:
+                   known: Sequence = ()) -> list:
         """[x, x', ..., x^(order)] at t, the inputs following the Taylor rows u_rows:
         differences of derivatives() along the polynomials. `known`: leading rows already
         computed for this x with the same leading input rows (row k + 1 needs input rows
@@ -363,8 +366,9 @@ class PhysicsModel:
             sol = self.integrate(u_of_t, t, x, t_end, rtol, atol, self.event_functions(u_of_t))
             if sol.status == 0:
                 return sol.x
-            t = sol.t
-            x = self.on_event(t, sol.x, u_of_t(t), sol.event)
+            t, index = sol.t, sol.event
+            assert index is not None  # status 1: stopped at this terminal event
+            x = self.on_event(t, sol.x, u_of_t(t), index)
             if t >= t_end:
                 return list(x)
         raise IntegrationError(f"{self.model_name}: more than {self.max_events_per_step} "

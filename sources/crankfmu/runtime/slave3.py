@@ -30,6 +30,7 @@ passes both with fmi3SetFloat64 on two value references outside the modelDescrip
 from __future__ import annotations
 
 import math
+from typing import Any
 
 from pythonfmu3 import Fmi3SlaveBase
 from pythonfmu3.cosimulation import CoSimulation
@@ -207,9 +208,11 @@ class ModelSlave3(SlaveCore, Fmi3SlaveBase, CoSimulation, ModelExchange):
     def _arm(self) -> None:
         """The current mode's event and monitor functions, and their signs at (time, x)."""
         model, t, x = self._model, self._time, list(self._x)
+        assert model is not None  # armed after initialization
         model.restart_state, model.restart_time = x, t
-        slots = [(g, j, getattr(g, "direction", 0.0))
-                 for j, g in enumerate(model.event_functions(self._held_inputs))]
+        slots: list[tuple[Any, int | None, float]] = [
+            (g, j, getattr(g, "direction", 0.0))
+            for j, g in enumerate(model.event_functions(self._held_inputs))]
         if hasattr(model, "monitor_functions"):
             slots += [(g, None, getattr(g, "direction", 0.0))
                       for g in model.monitor_functions(self._held_inputs)]

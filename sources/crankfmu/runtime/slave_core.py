@@ -60,12 +60,12 @@ def variable_table(physics_class: type[PhysicsModel]) -> list[FmiVariable]:
     """The FMU's variables in value-reference order (FMI 2.0): the base table, then the
     companions of a Taylor coupling (the FMI 3.0 adapter puts its own variables between the
     two, so no value reference of an earlier build moved)."""
-    return list(_tables(physics_class))
+    return list(_tables(physics_class))  # type: ignore[arg-type]  # mypy: a class is not Hashable
 
 
 def base_table_size(physics_class: type[PhysicsModel]) -> int:
     """The variables before the Taylor coupling's companions."""
-    return _tables(physics_class).base
+    return _tables(physics_class).base  # type: ignore[arg-type]  # mypy: a class is not Hashable
 
 
 class _Tables(tuple):
@@ -130,6 +130,7 @@ class SlaveCore:
     `_log_error(message)`. Subclasses (the FMUs' entry scripts) set `physics_class`."""
 
     physics_class: type[PhysicsModel] = PhysicsModel
+    instance_name: str  # set by the library's slave class
     default_step = DEFAULT_STEP
     default_stop = DEFAULT_STOP
 
@@ -156,7 +157,8 @@ class SlaveCore:
         self._output_names = [v.name for v in cls.outputs]
         self._real_vrs = frozenset(vr for vr, v in enumerate(self._table) if v.kind == "Real")
         self._rows_valid = 0     # output derivatives valid up to this order (0: none)
-        self._state_rows = None  # (stamp, input rows, state rows) of the last derivatives
+        # (stamp, input rows, state rows) of the last derivatives
+        self._state_rows: tuple[int | None, list, list] | None = None
         self._stamp = 0          # changes whenever the state does
         self._last_step = DEFAULT_STEP  # s, the difference step's scale (runtime/taylor.py)
         self._model: PhysicsModel | None = None
@@ -252,7 +254,7 @@ class SlaveCore:
         else:
             model, x, stamp = self._model, self._x, self._stamp
         u_rows = self._input_rows()
-        known = []
+        known: list = []
         if self._state_rows is not None and stamp is not None and self._state_rows[0] == stamp:
             _, old_inputs, old_rows = self._state_rows
             same = 0  # leading input rows unchanged: state rows 0 .. same stay valid
@@ -319,6 +321,7 @@ class SlaveCore:
     def _advance(self, current_time: float, step_size: float, u_of_t) -> bool:
         """The states over the step; False (with the reason logged) if that fails."""
         model = self._model
+        assert model is not None  # stepping: initialization is over
         try:
             x = model.step(current_time, self._x, step_size, u_of_t, self._rtol, self._atol)
         except Exception as err:  # noqa: BLE001 - an exception must not reach the library

@@ -50,6 +50,7 @@ class InputPolynomial:
     host wrote."""
 
     __slots__ = ("t0", "u", "derivatives", "_quadratic", "_high", "moving")
+    _quadratic: tuple[list, list] | None
 
     def __init__(self, t0: float, u: list, *derivatives):
         self.t0, self.u = t0, u
@@ -148,7 +149,7 @@ def polynomial_value(rows: Sequence[Sequence[float]], s: float) -> list[float]:
 
 
 def state_rows(f: Callable, t: float, x: Sequence[float], u_rows: Rows, order: int,
-               delta: float, known: Rows = ()) -> Rows:
+               delta: float, known: Sequence = ()) -> Rows:
     """[x, x', ..., x^(order)] at t for x' = f(t, x, u), the inputs following the Taylor rows
     u_rows. `known`: leading rows already found for this x with the same leading input rows
     (row k + 1 depends on the input rows 0 .. k only), reused; the rows do not depend on
@@ -183,7 +184,7 @@ class AffineOutputs:
     def __init__(self, output_values: Callable, t: float, n_x: int, n_u: int,
                  indices: Sequence[int]):
         base = output_values(t, [0.0] * n_x, [0.0] * n_u)
-        self.terms = [[] for _ in indices]  # per output: (0 = state | 1 = input, index, coef)
+        self.terms: list[list] = [[] for _ in indices]  # per output: (0 = state | 1 = input, index, coef)
         for kind, n in ((0, n_x), (1, n_u)):
             for j in range(n):
                 unit = [0.0] * n

@@ -346,7 +346,10 @@ class PlanetaryClutchDrive(PhysicsModel):
         self._lock = NO_LOCK if not locked else locked[0] if len(locked) == 1 else ALL_LOCKED
         self._torque_b, self._decay_b = self._brake_law("b")
         self._torque_h, self._decay_h = self._brake_law("h")
-        self._map_key = self._frictions_key = None
+        self._map_key: tuple[float, float] | None = None
+        self._map_value: tuple[float, ...] = ()  # K and f of the map for _map_key
+        self._frictions_key: tuple | None = None
+        self._frictions_value: tuple[float, ...] = ()
         self._event_list = None
 
     # -- brake laws ------------------------------------------------------------------------
@@ -744,9 +747,9 @@ class PlanetaryClutchDrive(PhysicsModel):
                 g_b, g_h = self._G[i]
                 add(ZERO_EVENTS[k], lambda t, x, g_b=g_b, g_h=g_h: g_b * x[X.w_b] + g_h * x[X.w_h],
                     -sign)
-        sign = 1.0 if self.modes.command == 0 else -1.0
+        command_sign = 1.0 if self.modes.command == 0 else -1.0
         i_cmd = self.IN.command
-        add(COMMAND_EVENT, lambda t, x: sign * (self._u_of_t(t)[i_cmd] - 0.5), 1)
+        add(COMMAND_EVENT, lambda t, x: command_sign * (self._u_of_t(t)[i_cmd] - 0.5), 1)
         for tb in self._breakpoints():
             add(Event(EventKind.TIME, time=tb), lambda t, x, tb=tb: t - tb, 1)
         return events, funcs

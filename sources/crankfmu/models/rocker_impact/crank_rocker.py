@@ -176,7 +176,7 @@ class CrankRockerHammer(RockerImpact):
         return super().state_names() + crank + ("W_drive", "E_damped")
 
     def state_nominal(self) -> np.ndarray:
-        crank = [] if self._driven else [1.0, 30.0]
+        crank: list[float] = [] if self._driven else [1.0, 30.0]
         return np.concatenate([super().state_nominal(), crank + [1e3, 1e3]])
 
     def initial_state(self, u):

@@ -40,7 +40,7 @@ class RockerImpact(PhysicsModel):
 
     event_slots = 3  # the contact switch; in contact the P and T extrema (monitors)
 
-    parameters = (
+    parameters: tuple[Variable, ...] = (
         Variable("J", "kg.m2", "Rocker moment of inertia about the pivot axis", 0.734, min=0.0),
         Variable("m", "kg", "Rocker mass", 35.1, min=0.0),
         Variable("r", "m", "Distance pivot - centre of mass (along the pivot-strike line)", 0.106),
@@ -71,7 +71,7 @@ class RockerImpact(PhysicsModel):
         Variable("tool_gap", "m", "Tool end position at theta = 0 (strike_at_start = 0)", 0.0,
                  min=0.0),
     )
-    effects = (
+    effects: tuple[Effect, ...] = (
         Effect("hertz_contact", "Contact P = K delta^1.5 instead of the linearised spring c"),
         Effect("support_compliance", "Elastic pivot support c0 (off: pinned rocker, "
                                      "c0 -> infinity, strike-point mass J/S^2)", default=True),
@@ -79,12 +79,12 @@ class RockerImpact(PhysicsModel):
                                 "(k_n/1.25)^1.5, instead of the linearised c0 (needs "
                                 "support_compliance)"),
     )
-    inputs = (
+    inputs: tuple[Variable, ...] = (
         Variable("flange_tau", "N.m", "Drive torque on the rocker shaft", 0.0),
         Variable("flange_J", "kg.m2", "Drive inertia rigidly on the rocker shaft (added to J)",
                  0.0, min=0.0),
     )
-    outputs = (
+    outputs: tuple[Variable, ...] = (
         Variable("flange_w", "rad/s", "Rocker angular velocity theta'"),
         Variable("flange_phi", "rad", "Rocker angle theta"),
         Variable("P", "N", "Contact force rocker - tool"),

@@ -182,13 +182,16 @@ class Signal:
     """A smooth scalar signal: at(t) -> (value, derivative) for an array t; grid(t0, t1, n)
     -> (t, value, derivative) on n + 1 equally spaced points."""
 
-    def __init__(self, at: Callable[[np.ndarray], tuple]):
+    def __init__(self, at: Callable[[np.ndarray], tuple], grid: Callable | None = None):
         self._at = at
+        self._grid = grid  # a faster grid(t0, t1, n) than at() on a linspace, if given
 
     def at(self, t):
         return self._at(np.atleast_1d(np.asarray(t, dtype=float)))
 
     def grid(self, t0: float, t1: float, n: int):
+        if self._grid is not None:
+            return self._grid(t0, t1, n)
         t = np.linspace(t0, t1, n + 1)
         v, dv = self.at(t)
         return t, v, dv
@@ -268,8 +271,8 @@ class LinearFlow:
             if other is None:
                 return y[:, index], y[:, d_index]
             return y[:, index] + y[:, other[0]], y[:, d_index] + y[:, other[1]]
-        sig = Signal(lambda t: pick(self(t)))
-        sig.grid = lambda t0, t1, n: (lambda ty: (ty[0], *pick(ty[1])))(self.grid(t0, t1, n))
+        sig = Signal(lambda t: pick(self(t)),
+                     lambda t0, t1, n: (lambda ty: (ty[0], *pick(ty[1])))(self.grid(t0, t1, n)))
         return sig
 
 
@@ -403,6 +406,7 @@ def linearise(data: RockerData, *, pinned: bool = False, method: str = "first",
                                 f"cycles (Pm history {hist_P[-4:]})")
         c = linearised_contact_stiffness(K, Pm)
         if pinned or fixed_c0 is not None:
+            assert c0 is not None  # inf when pinned, else the given one
             return Linearisation(c, c0, Pm, _peaks(data, c, c0, method)[1],
                                  tuple(hist_P), (), method)
         if data.m * data.r * data.S == data.J or data.eps < 1e-24:
@@ -445,7 +449,7 @@ class ImpactResult:
     tau: float       # P returns to zero
     Tm: float        # signed T at the largest |T| on [0, tau]
     t_Tm: float
-    flow: LinearFlow = field(repr=False, default=None)
+    flow: LinearFlow | None = field(repr=False, default=None)
 
     def P(self, t):
         return self.flow(t)[..., 2]

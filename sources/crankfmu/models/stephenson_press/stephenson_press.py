@@ -253,7 +253,7 @@ def _crossing(angle: float, direction: int):
     """A terminal event where phi crosses `angle` in `direction`."""
     def g(t, x):
         return x[0] - angle
-    g.terminal, g.direction = True, direction
+    g.terminal, g.direction = True, direction  # type: ignore[attr-defined]  # scipy's convention
     return g
 
 
