@@ -35,7 +35,7 @@ from .errors import CrankfmuError
 try:
     import fcntl
 except ImportError:  # not POSIX: sets are written unlocked
-    fcntl = None
+    fcntl = None  # type: ignore[assignment]
 
 
 class OutputError(CrankfmuError, ValueError):

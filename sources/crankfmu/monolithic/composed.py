@@ -146,7 +146,8 @@ class ComposedModel(PhysicsModel):
         positions = {n: k for k, n in enumerate(models)}
         for name, model in models.items():
             n = len(model.state_names())
-            sources = []
+            # ("link", part, output), ("external", signal) or ("start", value) per input
+            sources: list[tuple] = []
             for var in model.inputs:
                 ref = f"{name}.{var.name}"
                 if ref in links:
@@ -178,7 +179,7 @@ class ComposedModel(PhysicsModel):
 
     def _needed_outputs(self) -> list[set[int]]:
         """Per part, the output indices some connected input reads."""
-        needed = [set() for _ in self.parts]
+        needed: list[set[int]] = [set() for _ in self.parts]
         for part in self.parts:
             for src in part.sources:
                 if src[0] == "link":
@@ -188,7 +189,7 @@ class ComposedModel(PhysicsModel):
     def _plan(self, wanted: list[set[int]]) -> list[tuple[int, list[int]]]:
         """Evaluation sequence [(part, outputs taken)] such that every output is evaluated after
         the outputs its feedthrough inputs come from."""
-        ready = [set() for _ in self.parts]
+        ready: list[set[int]] = [set() for _ in self.parts]
         plan = []
         while any(wanted[k] - ready[k] for k in range(len(self.parts))):
             progress = False
@@ -227,7 +228,7 @@ class ComposedModel(PhysicsModel):
     def inputs_at(self, t: float, x: np.ndarray) -> list[np.ndarray]:
         """The input vector of every part at time t and composed state x."""
         xs = self.split(x)
-        outs = [None] * len(self.parts)
+        outs: list = [None] * len(self.parts)
         for k, _ in self.plan:  # each part's outputs from the inputs its sources have so far
             part = self.parts[k]
             outs[k] = part.model.output_values(t, xs[k], self._fill(part, t, outs))
@@ -274,8 +275,8 @@ class ComposedModel(PhysicsModel):
         """As the master's initialize: every component takes its initial state from its inputs,
         passed along in sweeps (one per component + 1) until they settle."""
         t0 = self.scene.start_time if t0 is None else t0
-        outs = [None] * len(self.parts)
-        xs = [None] * len(self.parts)
+        outs: list = [None] * len(self.parts)
+        xs: list = [None] * len(self.parts)
         for _ in range(len(self.parts) + 1):
             for k, part in enumerate(self.parts):
                 u_k = np.nan_to_num(self._fill(part, t0, outs), nan=0.0)
@@ -313,8 +314,9 @@ class ComposedModel(PhysicsModel):
         def wrapped(t, x):
             current["x"] = x
             return g(t, x[states])
-        wrapped.terminal = getattr(g, "terminal", False)
-        wrapped.direction = getattr(g, "direction", 0.0)
+        # scipy's convention, attributes on the function (mypy cannot type them)
+        wrapped.terminal = getattr(g, "terminal", False)  # type: ignore[attr-defined]
+        wrapped.direction = getattr(g, "direction", 0.0)  # type: ignore[attr-defined]
         return wrapped
 
     def monitor_functions(self, u_of_t=None) -> list:
