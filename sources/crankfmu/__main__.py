@@ -69,7 +69,7 @@ def run() -> None:
     if _Interrupts.count and status != 130:
         sys.stderr.write(_INTERRUPTED)
         status = 130
-    _exit(status)
+    _exit(130 if status is None else status)  # None only after an interrupt
 
 
 def _exit(status: int) -> None:

@@ -78,7 +78,7 @@ class Result:
     @property
     def names(self) -> list[str]:
         """The recorded variables ("comp.var"), without "time"."""
-        return list(self.values.dtype.names[1:])
+        return list(self.values.dtype.names or ())[1:]
 
     def __getitem__(self, name: str) -> np.ndarray:
         return self.values[name]

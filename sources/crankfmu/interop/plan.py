@@ -19,6 +19,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 from fmpy import read_model_description
@@ -99,8 +100,9 @@ def plan_scene(scene: Scene, fmu_dir: Path, stop_time: float | None = None) -> P
     scene's [master] algorithm and extrapolation do not apply: the engines run their own
     fixed-step Jacobi scheme with inputs held over each step (crankfmu's jacobi master at
     extrapolation 0 is the same algorithm)."""
-    descs = {name: _description(name, resolve_fmu(scene, name, Path(fmu_dir)))
-             for name in scene.components}
+    # stand-ins for FmuInstance: the attributes the wiring's checks read (_description)
+    descs: dict[str, Any] = {name: _description(name, resolve_fmu(scene, name, Path(fmu_dir)))
+                             for name in scene.components}
     check_components(scene, descs)
     links = check_links(scene, descs)
     comps = {name: _component_plan(descs[name], comp.effects, comp.parameters)

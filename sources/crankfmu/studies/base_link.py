@@ -88,9 +88,9 @@ def mass_sweep(scene, masses=DEFAULT_MASSES, cases=CASES) -> dict:
             err = _first_approximation(p, motor, u0, lag, cm)
             rev = press_steady_revolution(p, motor, u0, crank_mass=cm)
             rows.append((rev.delta, err.delta, err.L.amp[0], err.J0))
-        rows = np.array(rows)
-        out[case] = {"mass": masses, "delta_sim": rows[:, 0], "delta_1": rows[:, 1],
-                     "L1": rows[:, 2], "J0": rows[:, 3]}
+        table = np.array(rows)
+        out[case] = {"mass": masses, "delta_sim": table[:, 0], "delta_1": table[:, 1],
+                     "L1": table[:, 2], "J0": table[:, 3]}
     return out
 
 

@@ -30,6 +30,7 @@ import csv
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -125,8 +126,8 @@ def metrics(s: Series) -> dict:
     t_end = ends[-1] if ends else float(t[-1])
     window = (t >= s.from_time) & (t <= t_end)
     w, tw = v["crank_speed"][window], t[window]
-    out = {"strokes": len(ends), "window_start": s.from_time, "window_end": t_end,
-           "missing": {}}
+    out: dict[str, Any] = {"strokes": len(ends), "window_start": s.from_time,
+                           "window_end": t_end, "missing": {}}
     if len(tw) < 2:
         why = (f"the analysis window from from_time = {s.from_time:g} s to the run's end at "
                f"{float(t[-1]):g} s holds {len(tw)} recorded point(s), fewer than 2")

@@ -51,11 +51,15 @@ import traceback
 from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterable
+from typing import TYPE_CHECKING, Any, Callable, Iterable
 
 import numpy as np
 
 from ..cosim.workers import worker_dir
+
+if TYPE_CHECKING:
+    from ..cosim.workers import Lifeline
+    from ..system.scene import Scene
 
 STATUSES = ("completed", "failed", "refused", "error", "lost")
 
@@ -68,8 +72,8 @@ class RunTask:
     recorded arrays (also on the partial rows of a failed run); `keep_series` False drops the arrays from
     the output (a sweep needs its figures only)."""
 
-    key: object
-    scene: object
+    key: Any  # the study's name for the run (a setting's index, a case's label)
+    scene: Scene
     post: Callable | None = None
     post_args: dict = field(default_factory=dict)
     keep_series: bool = True
@@ -78,7 +82,7 @@ class RunTask:
 
 @dataclass
 class RunOutput:
-    key: object
+    key: Any
     status: str                       # one of STATUSES
     reason: str = ""
     names: list = field(default_factory=list)
@@ -98,6 +102,8 @@ class RunOutput:
         return self.status == "completed"
 
     def column(self, name: str) -> np.ndarray:
+        if self.rows is None:
+            raise ValueError(f"run {self.key}: no recorded rows (status {self.status})")
         return self.rows[:, 1 + self.names.index(name)]
 
 
@@ -333,7 +339,7 @@ class LocalPoolExecutor(Executor):
         self.jobs = max(1, int(jobs or os.cpu_count() or 1))
         self.max_losses = max_losses
         self.description = f"{self.jobs} local worker process{'es' if self.jobs > 1 else ''}"
-        self._lifeline = None  # the pipe whose closing ends the pool's workers
+        self._lifeline: Lifeline | None = None  # the pipe whose closing ends the workers
         self._pool = self._new_pool()
 
     def _new_pool(self):
@@ -355,6 +361,7 @@ class LocalPoolExecutor(Executor):
 
     def _close_pool(self) -> None:
         from ..cosim.workers import close_pool
+        assert self._lifeline is not None  # made with the pool
         close_pool(self._pool, self._lifeline)
         self._pool = None
 

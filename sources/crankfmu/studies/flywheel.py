@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -48,7 +49,7 @@ def eq28_conventions(press, motor, u0: float) -> dict:
     drive = pa.ReducedDrive.from_models(press, motor, u0)
     W, J_D, s = pa.mean_speed(drive), drive.J_D, drive.s
     i2 = press.p.gear_ratio ** 2
-    out = {"omega0": W, "J_D": J_D, "s": s}
+    out: dict[str, Any] = {"omega0": W, "J_D": J_D, "s": s}
     for name, J_M0 in (("paper", press.J_constant(0.0)),
                        ("mean", pa.mean_inertia(drive) - J_D)):
         J_Mx = pa.flywheel_inertia_theta0(W, J_D, J_M0, s)
@@ -69,9 +70,9 @@ def eq28_against(press, motor, u0: float, parameter: str = "m5", values=None) ->
         c = eq28_conventions(StephensonPress({**vars(press.p), parameter: float(v)},
                                              sorted(press.enabled)), motor, u0)
         rows.append((c["paper"]["J_Mx_motor"], c["mean"]["J_Mx_motor"], c["relative"]))
-    rows = np.array(rows)
-    return {"parameter": parameter, "values": values, "J_Mx_paper": rows[:, 0],
-            "J_Mx_mean": rows[:, 1], "relative": rows[:, 2],
+    table = np.array(rows)
+    return {"parameter": parameter, "values": values, "J_Mx_paper": table[:, 0],
+            "J_Mx_mean": table[:, 1], "relative": table[:, 2],
             "scene": getattr(press.p, parameter)}
 
 

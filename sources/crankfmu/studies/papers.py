@@ -500,7 +500,7 @@ def impact_data(scene, k_n: float | None = None) -> dict:
     sc = load_scene(scene)
     comp = next((c.name for c in sc.components.values() if c.fmu == "RockerImpact"), None)
     if comp is None:
-        _component(sc, "impact", "RockerImpact")   # raises: no such component
+        comp = _component(sc, "impact", "RockerImpact").name  # raises: no such component
     for var in ("P", "T", "c_contact_used", "c_support_used"):
         if f"{comp}.{var}" not in sc.record:
             raise SceneError(sc.path, "record.variables", f"the figure needs {comp}.{var}")
@@ -756,12 +756,12 @@ def planetary_closed_form(d: dict, c0: float, c1: float, scene: str, w_a0: float
     z2 = expm(A2 * (t2 - t1)) @ z1
     z2[i_mover] = 0.0
     A3, _, _ = pieces(dict(mode2, **{mover: 0}))
-    t, z = [], []
+    t_pieces, z_pieces = [], []
     for A, za, ta, tb in ((A1, z0, 0.0, t1), (A2, z1, t1, t2), (A3, z2, t2, t_end)):
         ts, zs = grid(A, za, tb - ta)
-        t.append(ts + ta)
-        z.append(zs)
-    t, z = np.concatenate(t), np.concatenate(z)
+        t_pieces.append(ts + ta)
+        z_pieces.append(zs)
+    t, z = np.concatenate(t_pieces), np.concatenate(z_pieces)
     w_b, w_h = z[:, 0], z[:, 1]
     out = {"t_slip": t1, "t_lock": t2, "t": t, "w_b": w_b, "w_h": w_h,
            "w_a": -p * w_b + (1 + p) * w_h}

@@ -61,7 +61,7 @@ def _setup(scene_path):
     return scene, float(edges[0]), -0.5 * math.pi   # S = r sin phi + ...: least at -pi/2
 
 
-def _run(scene, t_on: float, t_stop: float | None, stop_time: float) -> dict:
+def _run(scene, t_on: float, t_stop: float | None, stop_time: float) -> np.ndarray:
     from ..system.load import prepare_scene
     from ..system.scene import InputSignal
     from .papers import simulated
@@ -111,9 +111,9 @@ def stopping_sweep(scene_path, angles=DEFAULT_ANGLES) -> dict:
                      v["drive.E_brake_b"][-1] - v["drive.E_brake_b"][k],
                      np.degrees(v["press.phi"][-1] - v["press.phi"][k])))
         progress(f"  stop {n}/{angles.size} at {angle:g} deg: {rows[-1][5]:.4f} s")
-    rows = np.array(rows)
+    table = np.array(rows)
     keys = ("angle", "t_command", "w_crank", "w_a", "E_kin", "t_stop", "E_h", "E_b", "travel")
-    out = {k: rows[:, j] for j, k in enumerate(keys)}
+    out: dict = {k: table[:, j] for j, k in enumerate(keys)}
     out["scene"] = scene.name
     return out
 

@@ -71,7 +71,7 @@ class ReducedDrive:
         u0 [V] is the constant armature voltage (speed loop off)."""
         i = press.p.gear_ratio
         J_input = motor.p.J_rotor + motor.p.J_flywheel
-        kinks = ()
+        kinks: tuple[float, ...] = ()
         if press.on("forging_load"):
             a = press.p.forging_angle
             kinks = ((0.5 * math.pi - a) % (2 * math.pi), (0.5 * math.pi) % (2 * math.pi))

@@ -81,6 +81,7 @@ class Vary:
         """The values (a range's N points: count_points has checked there is an N)."""
         if self.values is not None:
             return list(self.values)
+        assert self.lo is not None and self.hi is not None and self.n is not None
         return [float(v) for v in np.linspace(self.lo, self.hi, self.n)]
 
     @property
@@ -92,6 +93,7 @@ class Vary:
     def bounds(self) -> tuple[float, float]:
         if self.values is not None:
             return min(self.values), max(self.values)
+        assert self.lo is not None and self.hi is not None  # a range (parse_vary)
         return self.lo, self.hi
 
     def check(self, name: str = "--vary") -> "Vary":

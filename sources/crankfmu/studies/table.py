@@ -4,6 +4,8 @@ same table is a CSV with plain column names and a JSON sidecar whose "units" map
 to its unit (docs/cli.md: units are never part of a column's name)."""
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 
@@ -11,9 +13,15 @@ class Table:
     """Mixed into a study's result: `columns`, `rows` (dicts column -> value) and `units`
     (column -> unit) are the table."""
 
-    columns: list[str]
-    rows: list[dict]
-    units: dict[str, str | None]
+    if TYPE_CHECKING:  # fields of a dataclass (SweepTable) or properties (the others)
+        @property
+        def columns(self) -> list[str]: ...
+
+        @property
+        def rows(self) -> list[dict]: ...
+
+        @property
+        def units(self) -> dict: ...
 
     def column(self, name: str) -> np.ndarray:
         """One numeric column as an array (nan where a row has no number)."""

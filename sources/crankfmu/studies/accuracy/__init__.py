@@ -10,9 +10,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..table import Table
-
 from ...cosim.events import EventError, EventSpec, event_error, event_errors, parse_event_specs
 from ...cosim.metrics import (METRICS, Metric, MetricError, make_metric, observed_order, scene_event_specs,
                       scene_metric_name, steady_figures)
@@ -22,6 +22,9 @@ from .sweep import (FLOOR_FACTOR, UNSTABLE_ERROR, Outcome, Setting, check_run_fi
                     fewest_steps, load_or_solve_reference, orders,
                     read_reference_file, reference_grid, resume_key, run_settings,
                     settings_for)
+
+if TYPE_CHECKING:
+    from ..executor import Executor
 
 DEFAULT_STEP_FACTORS = (4.0, 2.0, 1.0, 0.5)          # x the scene's step
 DEFAULT_TOLERANCES = (1e-2, 1e-3, 1e-4)              # a variable-step master's sweep
@@ -60,7 +63,7 @@ class AccuracyOptions:
     jobs: int | None = 1                       # 1: in this process; N > 1 worker processes;
     #                                            0: one per core (cosim.companions.processes)
     scheduler: str | None = None               # a Dask scheduler's address instead
-    executor: object | None = None             # or any crankfmu.studies.executor.Executor
+    executor: Executor | None = None           # default: make_executor(jobs, scheduler)
     estimate: bool = True                      # the error estimate of each run (its companions)
     out_option: str = "--out"                  # how errors name out_dir (the API: "out")
 

@@ -23,7 +23,9 @@ def companion_settings(setting: Setting) -> list[Setting]:
         return []
     knob, _, values = companion_knobs(setting.algorithm, setting.step,
                                       setting.tolerance)
-    return [replace(setting, **{knob: v}) for v in values]
+    if knob == "step":
+        return [replace(setting, step=v) for v in values]
+    return [replace(setting, tolerance=v) for v in values]
 
 
 def extra_companions(settings: list[Setting]) -> list[Setting]:

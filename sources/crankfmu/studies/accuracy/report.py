@@ -152,8 +152,9 @@ def plot_estimates(path: Path, outcomes: list[Outcome], title: str) -> None:
     diagonal and the band of a factor 3 either side."""
     from ...cosim.results import PALETTE, new_figure, save_figure
 
-    points = [(o, o.extra.get("estimated_error")) for o in outcomes]
-    points = [(o, e) for o, e in points if o.ok and o.error > 0 and e is not None and e > 0]
+    estimates = [(o, o.extra.get("estimated_error")) for o in outcomes]
+    points: list[tuple[Outcome, float]] = [(o, e) for o, e in estimates
+                                            if o.ok and o.error > 0 and e is not None and e > 0]
     fig = new_figure(figsize=(6.5, 6))
     ax = fig.subplots()
     masters = sorted({o.setting.algorithm for o, _ in points})

@@ -24,6 +24,7 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -239,7 +240,7 @@ def run_settings(scene, settings: list[Setting], metric: Metric, ref: ReferenceS
     todo = [k for k, o in enumerate(outcomes) if o is None]
     tasks = {k: RunTask(k, trial_scene(scene, settings[k])) for k in todo}
     if not tasks:
-        return outcomes
+        return cast(list[Outcome], outcomes)  # every one kept
     own = executor is None
     executor = executor or make_executor(1)
 
@@ -257,7 +258,7 @@ def run_settings(scene, settings: list[Setting], metric: Metric, ref: ReferenceS
     finally:
         if own:
             executor.close()
-    return outcomes
+    return cast(list[Outcome], outcomes)  # each run reported done, lost runs too
 
 
 def resume_key(reference_key: str, metric: Metric) -> str:

@@ -185,7 +185,7 @@ def _vector(source, key, value, *, unit: bool) -> tuple[float, float, float]:
         if norm <= 1e-12:
             raise MechanismError(source, key, "is a zero vector", "a non-zero direction")
         v = v / norm
-    return tuple(float(c) for c in v)
+    return float(v[0]), float(v[1]), float(v[2])
 
 
 def _name(source, key, value):
@@ -298,7 +298,7 @@ def mechanism_from_dict(data: dict, source: str = "<memory>") -> Mechanism:
                              "one or more [[joints]] tables with name, between, type/free, "
                              "point, axis")
     known = set(links) | {FRAME}
-    joints = []
+    joints: list[Joint] = []
     for i, jt in enumerate(joints_raw):
         key = f"joints[{i}]"
         if not isinstance(jt, dict):
