@@ -184,7 +184,8 @@ class AffineOutputs:
     def __init__(self, output_values: Callable, t: float, n_x: int, n_u: int,
                  indices: Sequence[int]):
         base = output_values(t, [0.0] * n_x, [0.0] * n_u)
-        self.terms: list[list] = [[] for _ in indices]  # per output: (0 = state | 1 = input, index, coef)
+        # per output: (0 = state | 1 = input, index, coef)
+        self.terms: list[list] = [[] for _ in indices]
         for kind, n in ((0, n_x), (1, n_u)):
             for j in range(n):
                 unit = [0.0] * n
