@@ -26,7 +26,6 @@ largest crank-speed difference and the overlay plot.
 """
 from __future__ import annotations
 
-import csv
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -192,12 +191,11 @@ def format_table(rows, la: str, lb: str) -> str:
     return "\n".join(lines)
 
 
-def write_table(f, rows, la: str, lb: str) -> None:
-    """The table as CSV into the file `f` (written by crankfmu.outputs.atomic_write)."""
-    w = csv.writer(f)
-    w.writerow(["metric", "unit", la, lb, "B_minus_A", "relative"])
-    for row in rows:
-        w.writerow([row[0], row[1]] + [repr(float(x)) for x in row[2:]])
+def write_table(path: Path, rows, la: str, lb: str) -> None:
+    """The table as compare.csv at `path` (crankfmu.outputs.write_table: written whole)."""
+    from ..outputs import write_table as write_csv_table
+    write_csv_table(path, ["metric", "unit", la, lb, "B_minus_A", "relative"],
+                    ([row[0], row[1]] + [repr(float(x)) for x in row[2:]] for row in rows))
 
 
 def overlay_figure(a: Series, b: Series, title: str):
@@ -302,7 +300,6 @@ def compare_scenes(scene_a, scene_b, out_dir: Path, options, executor=None,
     parallel on a pool or cluster); without one they run in this process one after the other.
     Same numbers. Everything is checked before the runs (check_compare_outputs)."""
     from ..cosim.results import save_figure
-    from ..outputs import atomic_write
     out_dir = check_compare_outputs(scene_a, scene_b, out_dir, option, stop_option)
     la, lb = compare_labels(scene_a, scene_b)
     if executor is None:
@@ -311,7 +308,7 @@ def compare_scenes(scene_a, scene_b, out_dir: Path, options, executor=None,
     else:
         a, b = _run_both(executor, [(scene_a, la), (scene_b, lb)], out_dir, options)
     rows = compare_table(a, b)
-    atomic_write(out_dir / "compare.csv", lambda f: write_table(f, rows, la, lb))
+    write_table(out_dir / "compare.csv", rows, la, lb)
     png = save_figure(overlay_figure(a, b, f"{la} (A) vs {lb} (B)"), out_dir / "compare.png") \
         if plot else None
     text = format_table(rows, la, lb)

@@ -1,7 +1,6 @@
 """The accuracy sweep's outputs: terminal table, CSV, work-precision plot."""
 from __future__ import annotations
 
-import csv
 import math
 from pathlib import Path
 
@@ -31,17 +30,11 @@ def table_row(o: Outcome, metric: str) -> dict:
 
 def write_table_csv(path: Path, outcomes: list[Outcome], metric) -> Path:
     """accuracy.csv and its sidecar accuracy.json (the metric, the units of the columns),
-    written through crankfmu.outputs.atomic_write; returns the sidecar's path."""
+    each written whole (crankfmu.outputs); returns the sidecar's path."""
     import json
 
-    from ...outputs import atomic_write
-
-    def write(f) -> None:
-        w = csv.writer(f)
-        w.writerow(COLUMNS)
-        for o in outcomes:
-            w.writerow(table_row(o, metric.name).values())
-    atomic_write(path, write)
+    from ...outputs import atomic_write, write_table
+    write_table(path, COLUMNS, (table_row(o, metric.name).values() for o in outcomes))
     sidecar = Path(path).with_suffix(".json")
     text = json.dumps({"csv": Path(path).name, "metric": metric.name,
                        "metric_description": metric.describe(), "units": UNITS},
