@@ -15,10 +15,9 @@ Every command that writes results takes one output folder (`--out DIR`; the Pyth
 after checking the name again, so a reader sees the old file or the new one, never half of
 one, and nothing but a regular file is ever replaced; `write_table` writes a CSV table so.
 `open_regular` opens a file to be written in place (a table appended row by row) under the
-same rule. `folder_lock` holds an exclusive
-lock on the folder itself (flock on the folder: no lock file is left behind) while a set of
-files that belong together is written, so two processes writing the same names at once cannot
-interleave their sets.
+same rule. `folder_lock` holds an exclusive lock on the folder itself (flock on the folder: no
+lock file is left behind) while a set of files that belong together is written, so two
+processes writing the same names at once cannot interleave their sets.
 """
 from __future__ import annotations
 
