@@ -134,16 +134,18 @@ def test_an_fmu_bundles_the_runtime_and_its_model_folder_only(fmu_dir, fmi3_dir,
     assert bundled == (expected - {other}) | {"__init__.py", "models/__init__.py"}
 
 
-def test_an_edit_to_one_model_changes_only_its_build_id(tmp_path, monkeypatch):
-    """Per-model digests: a copy of the sources with dc_motor.py edited gives DcServoMotor a new
-    build id and leaves StephensonPress's as it was."""
+@pytest.mark.parametrize("edited", ["dc_motor.py", "README.md"])
+def test_an_edit_to_one_model_changes_only_its_build_id(tmp_path, monkeypatch, edited):
+    """Per-model digests: a copy of the sources with the DC motor's code or its model card (which
+    the FMU carries as documentation/index.html) edited gives DcServoMotor a new build id and
+    leaves StephensonPress's as it was."""
     import shutil
 
     from crankfmu.fmu import build
     copy = tmp_path / "crankfmu"
     shutil.copytree(build.PACKAGE_DIR, copy, ignore=shutil.ignore_patterns("__pycache__"))
-    motor = copy / "models" / "dc_motor" / "dc_motor.py"
-    motor.write_text(motor.read_text() + "# an edit\n")
+    motor = copy / "models" / "dc_motor" / edited
+    motor.write_text(motor.read_text() + "\n# an edit\n")
     before = {m: build.digest_of(build.catalog_sources(m))
               for m in ("DcServoMotor", "StephensonPress")}
     monkeypatch.setattr(build, "PACKAGE_DIR", copy)

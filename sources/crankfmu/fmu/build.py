@@ -38,12 +38,13 @@ PACKAGE_DIR = Path(__file__).resolve().parents[1]
 RUNTIME_DIR = "runtime"  # bundled whole in every FMU, with the model's folder
 # The runtime imports all its modules at once: a later FMU of the same build finds them in
 # sys.modules even after the FMU that first loaded the package was freed and its files deleted.
-# The launcher's sources and the modelDescription writer are named here so that a new launcher
-# or writer is a new build.
+# The launcher's sources, the modelDescription writer and the model card are named here so that
+# a new launcher, writer or card is a new build (the FMU carries all three).
 RUNTIME_INIT = '''"""crankfmu runtime bundled in FMUs (build {digest}).
 
-Built with the FMU launcher whose sources have SHA-256 {launcher} and the modelDescription
-writer whose model_description.py has SHA-256 {writer}.
+Built with the FMU launcher whose sources have SHA-256 {launcher}, the modelDescription
+writer whose model_description.py has SHA-256 {writer} and the model card whose files have
+SHA-256 {card}.
 """
 import importlib
 import pkgutil
@@ -110,7 +111,8 @@ def bundle_sources(model_name: str | None, class_name: str, entry_script: str,
     files[f"{package}/__init__.py"] = RUNTIME_INIT.format(
         digest=MARK, launcher=hashlib.sha256(launcher.source_bytes(fmi_version)).hexdigest(),
         writer=hashlib.sha256((PACKAGE_DIR / "fmu" / "model_description.py").read_bytes()
-                              ).hexdigest()).encode()
+                              ).hexdigest(),
+        card=_card_digest(model_name)).encode()
     files[f"{entry_module(MARK, class_name)}.py"] = entry_script.encode()
     files[SLAVE_MODULE] = entry_module(MARK, class_name).encode()
     library = library_folder(fmi_version)
@@ -188,6 +190,16 @@ def model_card_files(model_name: str) -> list[Path]:
     folder = PACKAGE_DIR / "models" / model_folder(model_name)
     readme = folder / "README.md"
     return [readme] * readme.is_file() + sorted(p for p in folder.glob("*.md") if p != readme)
+
+
+def _card_digest(model_name: str | None) -> str:
+    """SHA-256 of the model card's files, each name and text (model_card_files; none for a model
+    outside the catalog, whose FMU has no card)."""
+    digest = hashlib.sha256()
+    for path in model_card_files(model_name) if model_name in FMU_MODELS else []:
+        text = path.read_bytes()
+        digest.update(f"{path.name}\0{len(text)}\0".encode() + text)
+    return digest.hexdigest()
 
 
 def model_card_html(model_name: str) -> str:
