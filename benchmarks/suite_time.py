@@ -23,6 +23,9 @@ every checkout is cleaned of what is not in git (`git clean -xdf`: no fmus/, no 
 given an empty user cache (XDG_CACHE_HOME); no warm-up. --idle SECONDS leaves the machine idle
 that long before each run (a run right after another may find a shared machine slower) and
 prints the load average each run starts at.
+
+Before each run, a plain Python loop (PROBE, best of 5, about 2 s) by the run's interpreter
+says how fast the machine is at that moment: runs of other days compare through it.
 """
 from __future__ import annotations
 
@@ -37,6 +40,18 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+# the machine's speed of the moment: `python -m timeit` of a loop of integer arithmetic
+PROBE = ["-m", "timeit", "-n", "3", "-r", "5", "-s", "r = range(3_000_000)", "s = 0",
+         "for i in r: s += i * i % 7"]
+
+
+def probe_ms(python: str) -> float:
+    """The best of five times of the PROBE loop by `python`, in ms."""
+    out = subprocess.run([python, *PROBE], capture_output=True, text=True, check=True).stdout
+    value, unit = out.split(":", 1)[1].split()[:2]  # "3 loops, best of 5: 129 msec per loop"
+    return float(value) * {"sec": 1e3, "msec": 1.0, "usec": 1e-3}[unit]
 
 
 def busy_seconds() -> float:
@@ -114,11 +129,12 @@ def _measure(checkouts: dict[str, tuple[Path, str]], args, pytest_args: list[str
             env = _fresh(checkout) if args.fresh else {}
             time.sleep(args.idle)
             load = os.getloadavg()[0]
+            speed = probe_ms(python)
             wall, cpu, last = run_suite(checkout, pytest_args, python, env)
             runs[name].append((wall, cpu))
             print(f"{name:>12}: {wall:6.1f} s wall, {cpu:6.1f} core-s busy   "
-                  f"[{last}] {time.strftime('%H:%M:%S')}, load {load:.2f} at its start",
-                  flush=True)
+                  f"[{last}] {time.strftime('%H:%M:%S')}, load {load:.2f} and probe "
+                  f"{speed:.0f} ms at its start", flush=True)
     medians = {name: (statistics.median(w for w, _ in r), statistics.median(c for _, c in r))
                for name, r in runs.items()}
     for name, (wall, cpu) in medians.items():
