@@ -399,6 +399,7 @@ def floor_table(out: Path, setting: tuple, target: float = 1e-4, repeats: int = 
     from crankfmu.studies.accuracy import make_metric
     from crankfmu.studies.accuracy.sweep import load_or_solve_reference
     from crankfmu.fmu import instance as fmu_module
+    from crankfmu.masters import sweep_code
     from crankfmu.cosim.runner import RunOptions, run_scene
     from crankfmu.monolithic.composed import ComposedModel
     from crankfmu.monolithic.solve import RecordMap, record_times
@@ -426,6 +427,9 @@ def floor_table(out: Path, setting: tuple, target: float = 1e-4, repeats: int = 
             in_do_step[0] += CLOCK() - start
     runs = []
     fmu_module.FmuInstance.do_step = timed_do_step
+    # the generic sweep, whose doStep goes through the wrapper timed above (a written sweep,
+    # masters/sweep_code.py, calls the same FMI function directly)
+    write_sweep, sweep_code.write_sweep = sweep_code.write_sweep, lambda master, sequential: None
     try:
         for _ in range(repeats):
             in_do_step[0] = 0.0
@@ -434,6 +438,7 @@ def floor_table(out: Path, setting: tuple, target: float = 1e-4, repeats: int = 
             runs.append((result.cpu_seconds, in_do_step[0], result))
     finally:
         fmu_module.FmuInstance.do_step = original
+        sweep_code.write_sweep = write_sweep
     cpu, inside, result = sorted(runs, key=lambda r: r[0])[len(runs) // 2]
     rec = result.recorder
     error = metric.error(rec.rows[:, 0], {k: rec.column(k) for k in rec.names}, ref)

@@ -92,9 +92,14 @@ class Adaptive(Master):
         states = self.save_states()
         coefficients = self.source_coefficients(t, order)
         rows = {c: coefficients[c] for c in self.system.order}  # the same rows as the sweep's
+        # the sweep written out makes these rows itself, with the same floats (sweep_code.py)
+        written = self._written_sweep(True, order)
         while True:
             predicted = {c: evaluate(r, h) for c, r in rows.items()}
-            self.sequential_sweep(t, h, self.extrapolation, rows)
+            if written is not None:
+                written(t, h)
+            else:
+                self.sequential_sweep(t, h, self.extrapolation, rows)
             error = self._error(predicted)
             factor = SAFETY * error ** (-1.0 / (order + 1)) if error > 0 else MAX_FACTOR
             if error <= 1.0 or h <= self.min_step * (1 + 1e-9):

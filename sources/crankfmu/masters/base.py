@@ -49,7 +49,9 @@ and provides `initialize(t0)`, the public `step(t, h)` (calls `_step`, then keep
 communication-point history and the port energies), the two sweeps (`parallel_sweep`: Jacobi,
 `sequential_sweep`: Gauss-Seidel), and statistics per FMU. The sweeps run each FMU's gather and
 advance functions made once at construction (the ones `gather` and `advance_component` call),
-not those methods: a master that needs other inputs overrides the sweep or writes its own.
+not those methods, or, over FMI 2.0 FMUs, the same calls with the same floats written out for
+the scene as one function (masters/sweep_code.py): a master that needs other inputs overrides
+the sweep or writes its own.
 
 Inputs over a step are polynomials of degree <= 2 (extrapolation), or up to 5 (a Taylor
 coupling, masters/taylor.py), given as Taylor rows at the step start (value, first, second ...
@@ -60,6 +62,8 @@ cost less than numpy's per-call overhead, with the same operations and so the sa
 (scripts/masters_identity.py).
 """
 from __future__ import annotations
+
+from typing import Any
 
 from .history import HISTORY_DEPTH, Coefficients, History, evaluate, taylor_rows
 from .inputs import InputFeed
@@ -108,6 +112,7 @@ class Master:
                             for c in system.order]
         self._sequential_rows = rows_plan(system.order, system.in_sources, sequential=True)
         self._parallel_rows = rows_plan(system.order, system.in_sources, sequential=False)
+        self._written_sweeps: dict[bool, Any] = {}  # sequential? -> the sweep written out, or None
 
     # -- options --------------------------------------------------------------------------
     @classmethod
@@ -236,6 +241,9 @@ class Master:
         the Taylor coupling's rows)."""
         if self.taylor is not None:
             return self.taylor.sweep(self, t, h, sequential=False)
+        written = self._written_sweep(False, order)
+        if written is not None:
+            return written(t, h)
         rows_of, rows, plan = self.history.rows, {}, self._sweep_plan
         for (_, gather, advance, _), make in zip(plan, self._parallel_rows):
             for src, _ in make:  # extrapolated, each once (rows_plan)
@@ -267,6 +275,9 @@ class Master:
         extrapolated or through a source's newest point), made in the order the plan fixed once
         (rows_plan) into a plain dict: the lazy dict's lookups and bookkeeping cost
         about as much as the two FMI calls of a no-op step."""
+        written = self._written_sweep(True, order)
+        if written is not None:
+            return written(t, h)
         rows_of, rows = self.history.rows, {}
         newest: dict[str, list] = {}  # comp -> its outputs at t + h, once it has stepped
         end, outputs = t + h, self.system.outputs
@@ -275,6 +286,17 @@ class Master:
                 rows[src] = rows_of(src, t, order, (end, newest[src]) if interpolate else None)
             advance(t, h, gather(rows))
             newest[comp] = outputs[comp] = read()  # System.refresh_outputs
+
+    def _written_sweep(self, sequential: bool, order: int):
+        """The sweep written out for this scene (masters/sweep_code.py), where it applies: at
+        the master's own order, once the history holds the order + 1 points it takes; else
+        None (the generic sweep)."""
+        if order != self.extrapolation or len(self.history.times) <= order:
+            return None
+        if sequential not in self._written_sweeps:
+            from .sweep_code import write_sweep
+            self._written_sweeps[sequential] = write_sweep(self, sequential)
+        return self._written_sweeps[sequential]
 
     # -- rollback -------------------------------------------------------------------------
     def save_states(self) -> dict:
