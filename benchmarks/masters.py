@@ -409,6 +409,7 @@ def floor_table(out: Path, setting: tuple, target: float = 1e-4, repeats: int = 
     scene.stop_time = 1.0
     metric = make_metric("max", scene.record)
     grid = record_times(scene)
+    (out / "reference").mkdir(parents=True, exist_ok=True)  # write_run_set needs the folder
     ref, _, _ = load_or_solve_reference(scene, grid, out / "reference", 1e-10)
     algorithm, ex, step, tol = setting
     trial = copy.deepcopy(scene)

@@ -281,6 +281,7 @@ def part_d(out: Path, target: float = 1e-4) -> None:
     scene.stop_time = 1.0
     metric = make_metric("max", scene.record)
     grid = record_times(scene)
+    (out / "reference").mkdir(parents=True, exist_ok=True)  # write_run_set needs the folder
     ref, _, _ = load_or_solve_reference(scene, grid, out / "reference", 1e-10)
     candidates = [("adaptive", 2, 1e-3, tol) for tol in (1e-3, 3e-4, 1e-4)] + \
         [("gauss-seidel", 2, h, None) for h in (2e-3, 1e-3, 5e-4)] + \
