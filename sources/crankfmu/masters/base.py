@@ -63,7 +63,7 @@ cost less than numpy's per-call overhead, with the same operations and so the sa
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import Callable
 
 from .history import HISTORY_DEPTH, Coefficients, History, evaluate, taylor_rows
 from .inputs import InputFeed
@@ -112,7 +112,8 @@ class Master:
                             for c in system.order]
         self._sequential_rows = rows_plan(system.order, system.in_sources, sequential=True)
         self._parallel_rows = rows_plan(system.order, system.in_sources, sequential=False)
-        self._written_sweeps: dict[bool, Any] = {}  # sequential? -> the sweep written out, or None
+        # sequential? -> the sweep written out for the scene (sweep_code.py), or None
+        self._written_sweeps: dict[bool, Callable[[float, float], None] | None] = {}
 
     # -- options --------------------------------------------------------------------------
     @classmethod
@@ -287,7 +288,8 @@ class Master:
             advance(t, h, gather(rows))
             newest[comp] = outputs[comp] = read()  # System.refresh_outputs
 
-    def _written_sweep(self, sequential: bool, order: int):
+    def _written_sweep(self, sequential: bool, order: int
+                       ) -> Callable[[float, float], None] | None:
         """The sweep written out for this scene (masters/sweep_code.py), where it applies: at
         the master's own order, once the history holds the order + 1 points it takes; else
         None (the generic sweep)."""

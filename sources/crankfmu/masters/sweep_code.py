@@ -1,5 +1,6 @@
-"""A fixed-step sweep written out for one wired scene: Gauss-Seidel's or Jacobi's, with the same
-floats and the same FMI calls as the generic sweeps of masters.base.
+"""A sweep written out for one wired scene: Gauss-Seidel's (also the adaptive master's, which
+makes the same rows) or Jacobi's, with the same floats and the same FMI calls as the generic
+sweeps of masters.base.
 
 Why: per FMU and step the generic sweep makes about nine Python calls (the sources' Taylor rows,
 the gather, the advance, the rows writer, two buffer writers, doStep, the read) and lists for
@@ -12,8 +13,7 @@ What it covers: a sweep once the history holds every point the extrapolation ord
 run's first steps, with fewer points, and the Gauss-Seidel start-up corrector stay generic), of
 FMI 2.0 FMUs (FmuInstance) that take their inputs' derivatives (`<input>_d1`, `_d2`) or have no
 inputs. Elsewhere `write_sweep` gives None and the generic sweep runs: a Taylor coupling, a
-foreign FMU (its inputs held at the midpoint), FMI 3.0 FMUs, the adaptive master's sweep with
-its own rows.
+foreign FMU (its inputs held at the midpoint), FMI 3.0 FMUs (their calls take other arguments).
 
 Same floats: each source's rows are History.rows's (the Newton forms of masters.history, every
 expression as written there) at the same points; the inputs written are the generic rows
@@ -27,6 +27,7 @@ import functools
 import hashlib
 import linecache
 import time
+from typing import Callable
 
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import fmi2Real, fmi2ValueReference
@@ -34,7 +35,7 @@ from fmpy.fmi2 import fmi2Real, fmi2ValueReference
 from ..fmu.instance import FMI2_WARNING, FmuInstance
 
 
-def write_sweep(master, sequential: bool):
+def write_sweep(master, sequential: bool) -> Callable[[float, float], None] | None:
     """sweep(t, h) for `master` (Gauss-Seidel: `sequential`; Jacobi: not) at its extrapolation
     order, for a history of at least order + 1 points; None where the generic sweep must run
     (the module's docstring)."""
