@@ -251,3 +251,29 @@ def test_workers_are_forked_unless_an_fmu_call_failed_or_a_thread_runs(tmp_path,
     done = run_pool_script(script, tmp_path, "")  # "": no start method chosen
     assert done.stdout.split()[-4:] == ["fork", "forkserver", "fork", "forkserver"], \
         done.stdout
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the fork server: Linux")
+def test_a_temporary_folder_too_long_for_the_fork_server_is_named_when_workers_are_spawned(
+        short_tmp):
+    """The fork server's socket lies in the temporary folder, and AF_UNIX takes 108 bytes of
+    path at most: under a longer TMPDIR the pool's workers are spawned (slower to start), and
+    the run says so, naming the folder (before, silently)."""
+    long_tmp = short_tmp / ("x" * 60) / ("y" * 60)
+    long_tmp.mkdir(parents=True)
+    script = (
+        "import logging, multiprocessing, sys\n"
+        # as in a new interpreter, multiprocessing's temporary folder (where the server's socket
+        # goes) is made under TMPDIR (fresh_python's child has its server's)
+        "multiprocessing.process.current_process()._config.pop('tempdir', None)\n"
+        "logging.basicConfig(stream=sys.stdout, level=logging.INFO, format='%(message)s')\n"
+        "from crankfmu.cosim.workers import new_pool, close_pool\n"
+        "pool, lifeline = new_pool(1)\n"
+        "try:\n"
+        "    print('method', pool._mp_context.get_start_method(), pool.submit(abs, -2).result())\n"
+        "finally:\n"
+        "    close_pool(pool, lifeline)\n")
+    done = run_pool_script(script, long_tmp, "forkserver")
+    assert "method spawn 2" in done.stdout, done.stdout
+    assert "the workers are spawned" in done.stdout and str(long_tmp) in done.stdout, \
+        done.stdout

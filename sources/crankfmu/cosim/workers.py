@@ -24,6 +24,7 @@ spawned (start_method says why).
 """
 from __future__ import annotations
 
+import logging
 import os
 import sys
 import tempfile
@@ -95,6 +96,10 @@ def new_pool(jobs: int, preload: str = "crankfmu.cosim.runner"):
 
     method = start_method()
     if method == "forkserver" and not _fork_server_running(preload):
+        logging.getLogger("crankfmu").info(
+            "the workers are spawned (each imports crankfmu afresh): the fork server "
+            "cannot start, its socket's path in the temporary folder %s is longer than the "
+            "system allows (set TMPDIR to a shorter one)", tempfile.gettempdir())
         method = "spawn"
     context = multiprocessing.get_context(method)
     lifeline = Lifeline(context)
