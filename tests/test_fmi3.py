@@ -182,6 +182,10 @@ def _run(scene):
     return _result(scene).recorder
 
 
+# the adaptive case at tolerance 1e-3: its first step (one history point: held inputs) meets
+# the press's flange speed rising at 8,020 rad/s^2 against its nominal 1 rad/s, 8 x tolerance
+# at min_step (masters/adaptive.py: held inputs), in both runs alike; the master says so once
+@pytest.mark.filterwarnings("ignore:adaptive master. step at t = 0 s accepted at min_step")
 @pytest.mark.parametrize("name,versions,master", [
     ("servo_press", {"motor": 3, "press": 3}, {}),
     ("conventional_press", {"motor": 3, "press": 3}, {}),
