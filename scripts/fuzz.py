@@ -271,6 +271,12 @@ def main() -> int:
     if args.worker:
         worker()
         return 0
+    if args.models:
+        from crankfmu.models.catalog import FMU_MODELS
+        unknown = [m for m in args.models.split(",") if m not in FMU_MODELS]
+        if unknown:
+            ap.error(f"--models: {', '.join(unknown)} not a catalog model; allowed: "
+                     f"{', '.join(FMU_MODELS)}")
     work = args.work or Path(tempfile.mkdtemp(prefix="crankfmu-fuzz-"))
     work.mkdir(parents=True, exist_ok=True)
     fmus = args.fmus
