@@ -94,3 +94,36 @@ def test_a_trial_is_judged_by_where_its_ctrl_c_landed(tmp_path, fmu_dir):
     assert not _written_is_whole(csv, "imports", after)
     sidecar.write_text(json.dumps({**meta, "csv": {**meta["csv"], "rows": len(lines) - 6}}))
     assert not _written_is_whole(csv, "imports", "error: interrupted (Ctrl-C)\n")
+
+
+# a command that returns at once, and a Ctrl-C that lands as the handler is about to change to
+# "only count" for the first time: in the instant after the command returned
+LATE_CTRL_C = """
+import signal
+import crankfmu.__main__ as main
+import crankfmu.cli as cli
+cli.parse, cli.run_command = (lambda: None), (lambda args: 0)
+install = signal.signal
+def landing(signum, handler):
+    if handler == main._Interrupts.only_count and not landing.done:
+        landing.done = True
+        main._Interrupts.first_raises(signum, None)  # the Ctrl-C's KeyboardInterrupt
+    return install(signum, handler)
+landing.done = False
+signal.signal = landing
+main.run()
+"""
+
+
+def test_a_ctrl_c_just_after_the_command_returned_says_it_had_finished():
+    """Before: the handler changed to "only count" after run()'s try block, so a Ctrl-C in
+    the instant after the command returned raised a KeyboardInterrupt nothing caught: a
+    traceback (exit status 130 from Python, not from crankfmu). Now the change is the try's
+    last statement: the interrupt is caught, and the exit says the command had finished."""
+    from tests.support import fresh_python
+
+    done = fresh_python.run(LATE_CTRL_C, cwd=ROOT, timeout=60)
+    assert "Traceback" not in done.stderr, done.stderr
+    assert done.stderr == ("error: interrupted (Ctrl-C) while exiting; the command had "
+                           "finished\n"), done.stderr
+    assert done.returncode == 130

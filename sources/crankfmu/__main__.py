@@ -51,12 +51,18 @@ class _Interrupts:
 
 def run() -> None:
     signal.signal(signal.SIGINT, _leave_now)  # (again, for the `crankfmu` script's import)
+    status, finished = None, False
     try:
         from .cli import parse, run_command
         args = parse()  # imports every command: Ctrl-C still leaves at once
         signal.signal(signal.SIGINT, _Interrupts.first_raises)
         status = run_command(args)
+        finished = not _Interrupts.count  # uncut: a Ctrl-C from here on is after it
+        # switched inside the try: the one KeyboardInterrupt first_raises raises is caught
+        # here wherever it lands, and none comes after this line
+        signal.signal(signal.SIGINT, _Interrupts.only_count)
     except SystemExit as exc:  # argparse: --help, --version, a usage error
+        signal.signal(signal.SIGINT, _Interrupts.only_count)
         status = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
         if not isinstance(exc.code, (int, type(None))):
             sys.stderr.write(f"{exc.code}\n")
@@ -64,9 +70,9 @@ def run() -> None:
         if not _Interrupts.count:
             raise  # not an interrupt: a fault of crankfmu's, shown with its traceback
         # the KeyboardInterrupt itself, or what an import made of it (numpy's C extension
-        # turns one into an ImportError)
-        status = None
-    if _Interrupts.count and status != 130:
+        # turns one into an ImportError); after the command finished, its status stands
+        status = status if finished else None
+    if _Interrupts.count and not finished and status != 130:  # the command was cut short
         sys.stderr.write(_INTERRUPTED)
         status = 130
     _exit(130 if status is None else status)  # None only after an interrupt
