@@ -158,7 +158,6 @@ def write_csv(sweep: dict, path: Path) -> Path:
                        ([c, sweep[c]["mass"][k], sweep[c]["delta_sim"][k], sweep[c]["delta_1"][k],
                          sweep[c]["L1"][k], sweep[c]["J0"][k]]
                         for c in CASES for k in range(sweep[c]["mass"].size)))
-    return path
 
 
 def figure(sweep: dict):

@@ -403,4 +403,3 @@ def write_hertz_peak_table(rows: Sequence[dict], path):
                        ([r["S_factor"], r["k_n"], name, r[name]["c_support_used"],
                          r[name]["T_peak"], r[name]["P_peak"], r[name]["impact_duration"]]
                         for r in rows for name in ("linear", "hertz_peak")))
-    return path

@@ -168,7 +168,6 @@ def write_csv(items, path: Path) -> Path:
             row = table["rows"][j.name]
             rows.append([mech.name, j.name, f"p{j.f}", *(row[c] for c in COLUMNS), row["other"]])
     return write_table(path, ["mechanism", "joint", "pair", *COLUMNS, "other"], rows)
-    return path
 
 
 def figure(mech: Mechanism, result: StructureResult):
