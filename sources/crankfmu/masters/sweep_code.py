@@ -86,9 +86,11 @@ def _source(system, plans: list, order: int, sequential: bool, ports: bool) -> s
     """The sweep's Python source: per FMU in the stepping order, the rows its sources need (made
     as `plans`, masters.base.rows_plan, orders them), its inputs written, doStep, its outputs
     read; Jacobi reads every FMU's outputs after all have stepped."""
-    lines = ["def sweep(t, h):", "    times, values = history.times, history.values",
-             "    end = t + h", "    iv = end - t"]
-    lines += [f"    e{j} = times[-{j + 1}] - t" for j in range(order + 1)]
+    lines = ["def sweep(t, h):", "    times, values = history.times, history.values"]
+    if order:  # the points' times from t (held values at order 0 need none)
+        if sequential:  # the newest point's: (t + h) - t, as History.rows takes it
+            lines.append("    iv = (t + h) - t")
+        lines += [f"    e{j} = times[-{j + 1}] - t" for j in range(order + 1)]
     lines += [f"    V{j} = values[-{j + 1}]" for j in range(order + 1)]
     current: dict[str, str] = {}  # source -> the prefix of its rows' names in use
     for k, (comp, make) in enumerate(zip(system.order, plans)):
